@@ -1,0 +1,151 @@
+"""Physical style θ (NIO paper §5): muscle preferences, passive springs, rest pose, shoes.
+
+A style has 29·5 + 2 = 147 numbers:
+
+* ``alpha``  per joint DOF, ≥ 0, Σ = 1: relative cost of muscle effort at that DOF;
+* ``ks1``    stretching spring stiffness per joint DOF (N·m/rad), used where q > q̄;
+* ``ks2``    contracting spring stiffness per joint DOF (N·m/rad), used where q < q̄;
+* ``kd``     damping per joint DOF (N·m·s/rad);
+* ``q_rest`` rest pose q̄ per joint DOF (rad);
+* ``k_shoe`` shoe spring stiffness (N/m) and ``h_rest`` its rest length h̄ (m).
+
+Per-DOF fields are written in files as a mapping from joint DOF name to value (readable,
+order-free), and held in memory as numpy arrays in ``JOINT_DOF_NAMES`` order.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from scenarios.errors import InputError, Location
+from scenarios.yamlio import dump_yaml_atomic, load_model
+
+from .body import JOINT_DOF_NAMES, N_JOINT
+
+__all__ = ["Style", "default_style", "load_style", "save_style", "PER_DOF_FIELDS"]
+
+PER_DOF_FIELDS = ("alpha", "ks1", "ks2", "kd", "q_rest")
+
+
+class Provenance(BaseModel):
+    """Where a learned style came from."""
+
+    model_config = ConfigDict(extra="allow")
+    clip: str | None = None
+    frames: str | None = None
+    body: str | None = None
+    versions: dict[str, str] = Field(default_factory=dict)
+    g_final: float | None = None
+
+
+class Style(BaseModel):
+    """The 147 style parameters θ; see the module docstring for units."""
+
+    model_config = ConfigDict(extra="forbid", arbitrary_types_allowed=True, frozen=True)
+
+    name: str = "default"
+    alpha: Any
+    ks1: Any
+    ks2: Any
+    kd: Any
+    q_rest: Any
+    k_shoe: float = Field(ge=0.0, le=1e7)
+    h_rest: float = Field(ge=0.0, le=0.1)
+    provenance: Provenance | None = None
+
+    @field_validator(*PER_DOF_FIELDS, mode="before")
+    @classmethod
+    def _per_dof(cls, v, info):
+        name = info.field_name
+        if isinstance(v, dict):
+            unknown = sorted(set(v) - set(JOINT_DOF_NAMES))
+            if unknown:
+                raise ValueError(f"unknown joint DOF {unknown[0]!r}")
+            missing = [d for d in JOINT_DOF_NAMES if d not in v]
+            if missing:
+                raise ValueError(f"missing {len(missing)} joint DOF(s), e.g. {missing[0]!r}")
+            v = [v[d] for d in JOINT_DOF_NAMES]
+        try:
+            arr = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"expected {N_JOINT} numbers or a mapping joint DOF -> number") from None
+        if arr.shape != (N_JOINT,):
+            raise ValueError(f"expected {N_JOINT} values (one per joint DOF), got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError("values must be finite")
+        if name in ("alpha", "ks1", "ks2", "kd") and np.any(arr < 0):
+            j = int(np.argmin(arr))
+            raise ValueError(f"must be >= 0, but {JOINT_DOF_NAMES[j]} is {arr[j]}")
+        if name == "q_rest" and np.any(np.abs(arr) > np.pi):
+            raise ValueError("rest angles must lie in [-pi, pi] rad")
+        arr.setflags(write=False)
+        return arr
+
+    @model_validator(mode="after")
+    def _alpha_sum(self):
+        s = float(np.sum(self.alpha))
+        if not (0.5 < s < 2.0):
+            raise ValueError(f"alpha must sum to 1 (sums to {s:.4g})")
+        return self
+
+    def vector(self) -> np.ndarray:
+        """θ as one flat array (147,) in the order alpha, ks1, ks2, kd, q_rest, k_shoe, h_rest."""
+        return np.concatenate([getattr(self, f) for f in PER_DOF_FIELDS] + [[self.k_shoe, self.h_rest]])
+
+    @classmethod
+    def from_vector(cls, theta: np.ndarray, name: str = "learned", provenance: Provenance | None = None) -> "Style":
+        t = np.asarray(theta, dtype=float)
+        parts = {f: t[i * N_JOINT:(i + 1) * N_JOINT] for i, f in enumerate(PER_DOF_FIELDS)}
+        return cls(name=name, **parts, k_shoe=float(t[-2]), h_rest=float(t[-1]), provenance=provenance)
+
+    def with_(self, **changes) -> "Style":
+        data = {f: getattr(self, f) for f in self.model_fields}
+        data.update(changes)
+        return Style(**data)
+
+    def to_data(self) -> dict:
+        out: dict[str, Any] = {"name": self.name}
+        for f in PER_DOF_FIELDS:
+            out[f] = {d: round(float(x), 8) for d, x in zip(JOINT_DOF_NAMES, getattr(self, f))}
+        out["k_shoe"] = float(self.k_shoe)
+        out["h_rest"] = float(self.h_rest)
+        if self.provenance is not None:
+            out["provenance"] = self.provenance.model_dump(exclude_none=True)
+        return out
+
+
+def _joint_group(name: str) -> str:
+    return name.rsplit("_", 1)[0] if name.endswith(("_l", "_r")) else name
+
+
+# Stiffness scale (N·m/rad) per joint group for a 73 kg adult: larger joints, stiffer tissue.
+_DEFAULT_KS = {
+    "waist": 60.0, "chest": 60.0, "neck": 10.0, "shoulder": 8.0, "elbow": 3.0, "wrist": 1.0,
+    "hip": 40.0, "knee": 25.0, "ankle": 30.0, "toe": 5.0,
+}
+
+
+def default_style(mass: float = 73.0) -> Style:
+    """A neutral style: uniform α, moderate springs about a relaxed standing pose, soft shoes."""
+    ks = np.array([_DEFAULT_KS[_joint_group(d).split("_")[0]] for d in JOINT_DOF_NAMES]) * mass / 73.0
+    return Style(
+        name="default",
+        alpha=np.full(N_JOINT, 1.0 / N_JOINT),
+        ks1=ks, ks2=ks, kd=0.05 * ks,
+        q_rest=np.zeros(N_JOINT),
+        k_shoe=2.0e4 * mass / 73.0, h_rest=0.005,
+    )
+
+
+def load_style(path: str | os.PathLike) -> Style:
+    """Load and validate a style YAML file; errors name the file, line and field."""
+    return load_model(Style, path)
+
+
+def save_style(style: Style, path: str | os.PathLike, header: str = "") -> None:
+    """Write a style atomically as YAML."""
+    dump_yaml_atomic(style.to_data(), path, header)

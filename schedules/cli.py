@@ -1,0 +1,41 @@
+"""The ``compose`` command line."""
+from __future__ import annotations
+
+import argparse
+import sys
+from importlib.metadata import PackageNotFoundError, version
+
+from scenarios.errors import ComposeError
+
+__all__ = ["main", "build_parser"]
+
+
+def _version() -> str:
+    try:
+        return version("compose-motion")
+    except PackageNotFoundError:  # running from a source tree
+        return "0.0.0+src"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="compose", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"compose {_version()}")
+    parser.add_subparsers(dest="command", metavar="COMMAND")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args) or 0)
+    except ComposeError as exc:
+        print(f"compose: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
