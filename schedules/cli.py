@@ -2,12 +2,22 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from importlib.metadata import PackageNotFoundError, version
 
 from scenarios.errors import ComposeError
 
 __all__ = ["main", "build_parser"]
+
+# Each module registers its sub-commands with ``register(subparsers)``; a sub-command sets
+# ``func`` to a callable taking the parsed arguments and returning an exit code.
+COMMAND_MODULES = (
+    "schedules.cli_run",        # run, schedule
+    "schedules.cli_scenario",   # validate, schema, list
+    "schedules.cli_learn",      # learn
+    "schedules.cli_preview",    # preview, export
+)
 
 
 def _version() -> str:
@@ -20,7 +30,15 @@ def _version() -> str:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="compose", description=__doc__)
     parser.add_argument("--version", action="version", version=f"compose {_version()}")
-    parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+            continue
+        module.register(sub)
     return parser
 
 
