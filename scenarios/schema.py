@@ -1,0 +1,646 @@
+"""The scenario schema: what a scenario YAML file may say, with units and cross-field checks.
+
+A scenario names its characters (body preset and edits, style, start), their goals
+(footprints, walk_to, reach, tackle, avoid, style_change), the couplings between them
+(hand_hold, carry) and, optionally, an explicit schedule that overrides the compiler.
+
+Units: metres, kilograms, seconds; **angles in scenario files are degrees** (they are
+converted to radians where the scene is built).  Positions on the ground are ``[x, y]``
+(m, world frame, Z up); points in space are ``[x, y, z]``.
+
+This module belongs to the language layer and does not import ``scenegraph``: the names
+it checks (body presets, handles, joint DOFs) are listed here as strings, and a test
+asserts that they agree with the character model.
+
+Cross-field problems (a goal naming a missing character, a time outside the scenario, an
+unknown style, …) are raised as :class:`FieldProblem`, a ``ValueError`` that carries the
+field path *relative to the model that raised it*, so that the loader can point at the
+offending field's line and column.  Checks that need to know where the scenario file lives
+(style files) read ``base_dir`` and ``styles`` from the pydantic validation context; see
+:func:`scenarios.loader.validation_context`.
+"""
+from __future__ import annotations
+
+import difflib
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import (BaseModel, ConfigDict, Field, PrivateAttr, Strict, StringConstraints, ValidationInfo,
+                      field_validator, model_validator)
+
+__all__ = [
+    "Scenario", "CharacterSpec", "BodySpec", "ExtraMass", "LockedJoint", "RangeOfMotion", "StartSpec",
+    "Environment", "Ground", "Slope", "Region",
+    "Goal", "FootprintsGoal", "Footprint", "WalkToGoal", "ReachGoal", "TackleGoal", "AvoidGoal", "StyleChangeGoal",
+    "Coupling", "HandHold", "Carry", "HandleRef", "ScheduleSpec", "SCHEDULE_KINDS",
+    "FieldProblem", "BODY_PRESETS", "HANDLE_NAMES", "JOINT_DOF_NAMES", "JOINT_NAMES", "ADVERSARIAL_GOALS",
+    "joint_dofs", "is_style_path", "suggest",
+]
+
+# --- names shared with the character model (scenegraph asserts against these) ---------------
+
+BODY_PRESETS: tuple[str, ...] = ("adult_male", "adult_female", "child")
+
+_SIDED_HANDLES = ("heel", "ball", "toe", "palm", "shoulder", "knee", "ankle", "wrist", "elbow", "hip")
+HANDLE_NAMES: tuple[str, ...] = ("pelvis", "chest", "head", "head_top") + tuple(
+    f"{h}_{s}" for s in ("l", "r") for h in _SIDED_HANDLES)
+
+JOINT_DOF_NAMES: tuple[str, ...] = (
+    "waist_flex", "waist_lat", "waist_twist", "chest_flex", "neck_flex",
+    *(f"{d}_{s}" for s in ("l", "r") for d in (
+        "shoulder_flex", "shoulder_twist", "shoulder_abd", "elbow_flex", "wrist_flex",
+        "hip_flex", "hip_abd", "hip_rot", "knee_flex", "ankle_flex", "ankle_inv", "toe_flex")),
+)
+
+
+def _joint_of(dof: str) -> str:
+    base, side = (dof[:-2], dof[-2:]) if dof.endswith(("_l", "_r")) else (dof, "")
+    return base.split("_")[0] + side
+
+
+JOINT_NAMES: tuple[str, ...] = tuple(dict.fromkeys(_joint_of(d) for d in JOINT_DOF_NAMES))
+
+
+def joint_dofs(name: str) -> tuple[str, ...]:
+    """The joint DOFs named by a joint (``knee_l`` → ``knee_flex_l``) or by a DOF itself."""
+    if name in JOINT_DOF_NAMES:
+        return (name,)
+    return tuple(d for d in JOINT_DOF_NAMES if _joint_of(d) == name)
+
+
+ADVERSARIAL_GOALS = ("tackle", "avoid")
+SCHEDULE_KINDS = ("auto", "timewarp", "time_layered", "coupled", "decreasing_horizon")
+
+# --- small helpers --------------------------------------------------------------------------
+
+
+class FieldProblem(ValueError):
+    """A validation problem at ``path`` (relative to the model whose validator raised it)."""
+
+    def __init__(self, path: tuple, message: str, more: list[tuple[tuple, str]] | None = None):
+        self.path = tuple(path)
+        self.message = message
+        self.more = list(more or [])  # further problems (absolute paths) found by the same check
+        super().__init__(message)
+
+
+def suggest(value: str, known: list[str] | tuple[str, ...], what: str, limit: int = 8) -> str:
+    """``unknown style 'rnu' (known: default, run, walk); did you mean 'run'?``"""
+    known = sorted(known)
+    shown = ", ".join(known[:limit]) + (", …" if len(known) > limit else "")
+    msg = f"unknown {what} {value!r} (known: {shown})"
+    close = difflib.get_close_matches(str(value), known, n=1, cutoff=0.5)
+    if close:
+        msg += f"; did you mean {close[0]!r}?"
+    return msg
+
+
+def is_style_path(ref: str) -> bool:
+    """A style reference is a file path if it has a folder part or a YAML suffix."""
+    return "/" in ref or "\\" in ref or ref.endswith((".yaml", ".yml"))
+
+
+Num = Annotated[float, Strict()]
+Seconds = Annotated[float, Strict(), Field(ge=0.0, le=3600.0)]
+Degrees = Annotated[float, Strict()]
+Point2 = tuple[Num, Num]
+Point3 = tuple[Num, Num, Num]
+Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")]
+
+
+def _interval(v: tuple[float, float]) -> tuple[float, float]:
+    t0, t1 = v
+    if t0 < 0:
+        raise ValueError(f"interval starts at {t0} s, before 0")
+    if t1 <= t0:
+        raise ValueError(f"interval end {t1} s must be after its start {t0} s")
+    return v
+
+
+Interval = Annotated[tuple[Num, Num], Field(description="[t_start, t_end] (s), t_end > t_start >= 0")]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)
+
+
+def _check_handle(v: str) -> str:
+    if v not in HANDLE_NAMES:
+        raise ValueError(suggest(v, HANDLE_NAMES, "handle"))
+    return v
+
+
+# --- environment ----------------------------------------------------------------------------
+
+
+class Ground(_Model):
+    """Flat ground at z = 0."""
+
+    friction: Num = Field(1.0, gt=0.0, le=5.0, description="Coulomb friction coefficient μ (dimensionless)")
+
+
+class Region(_Model):
+    """An axis-aligned rectangle on the ground plane."""
+
+    min: Point2 = Field(description="lower-left corner [x, y] (m)")
+    max: Point2 = Field(description="upper-right corner [x, y] (m)")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        for axis, a, b in (("x", self.min[0], self.max[0]), ("y", self.min[1], self.max[1])):
+            if b <= a:
+                raise FieldProblem(("max",), f"region max {axis} ({b} m) must exceed min {axis} ({a} m)")
+        return self
+
+
+class Slope(_Model):
+    """A plane z = tan(angle) · ((p − origin) · (cos heading, sin heading)) over a region."""
+
+    name: Name | None = Field(None, description="label for markers and errors")
+    angle: Degrees = Field(ge=-45.0, le=45.0, description="inclination (deg); positive rises along heading")
+    heading: Degrees = Field(0.0, ge=-360.0, le=360.0, description="direction of steepest ascent (deg, from +X)")
+    region: Region = Field(description="where the slope replaces the flat ground")
+    origin: Point2 | None = Field(None, description="a point [x, y] (m) where the plane has z = 0; default: region centre")
+    friction: Num | None = Field(None, gt=0.0, le=5.0, description="μ on this slope; default: the ground's")
+
+
+class Environment(_Model):
+    ground: Ground = Field(default_factory=Ground, description="the flat ground z = 0")
+    slopes: list[Slope] = Field(default_factory=list, max_length=64, description="inclined planes over regions")
+
+
+# --- characters -----------------------------------------------------------------------------
+
+
+class ExtraMass(_Model):
+    """A point mass rigidly attached at a handle (e.g. a 3 kg suitcase in the right hand)."""
+
+    handle: str = Field(description="handle name, e.g. palm_r")
+    mass: Num = Field(gt=0.0, le=200.0, description="mass (kg)")
+    label: str | None = Field(None, max_length=64, description="what it is (for reports)")
+
+    check_handle = field_validator("handle")(_check_handle)
+
+
+class LockedJoint(_Model):
+    """A joint (all its DOFs) or a single DOF held at a fixed angle."""
+
+    joint: str = Field(description="joint name (knee_l, waist, …) or joint DOF name (knee_flex_l)")
+    angle: Degrees = Field(0.0, ge=-180.0, le=180.0, description="angle every locked DOF is held at (deg)")
+
+    @field_validator("joint")
+    @classmethod
+    def _known(cls, v: str) -> str:
+        if not joint_dofs(v):
+            raise ValueError(suggest(v, JOINT_NAMES + JOINT_DOF_NAMES, "joint or joint DOF"))
+        return v
+
+
+class RangeOfMotion(_Model):
+    """A reduced range of motion for one joint DOF."""
+
+    dof: str = Field(description="joint DOF name, e.g. knee_flex_r")
+    min: Degrees = Field(ge=-180.0, le=180.0, description="lower limit (deg)")
+    max: Degrees = Field(ge=-180.0, le=180.0, description="upper limit (deg)")
+
+    @field_validator("dof")
+    @classmethod
+    def _known(cls, v: str) -> str:
+        if v not in JOINT_DOF_NAMES:
+            raise ValueError(suggest(v, JOINT_DOF_NAMES, "joint DOF"))
+        return v
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.max <= self.min:
+            raise FieldProblem(("max",), f"max {self.max} deg must exceed min {self.min} deg")
+        return self
+
+
+class BodySpec(_Model):
+    """A body preset scaled to a height and mass, with edits."""
+
+    preset: Literal["adult_male", "adult_female", "child"] = Field("adult_male", description="body preset")
+    height: Num | None = Field(None, ge=0.5, le=2.5, description="stature (m); default: the preset's")
+    mass: Num | None = Field(None, ge=5.0, le=300.0, description="body mass (kg); default: the preset's")
+    extra_masses: list[ExtraMass] = Field(default_factory=list, max_length=16,
+                                          description="point masses carried at handles")
+    locked: list[LockedJoint] = Field(default_factory=list, max_length=29, description="locked joints or DOFs")
+    range_of_motion: list[RangeOfMotion] = Field(default_factory=list, max_length=29,
+                                                 description="reduced joint limits per DOF")
+    shoe_stiffness_scale: Num = Field(1.0, gt=0.0, le=100.0,
+                                      description="factor on the style's shoe stiffness k_shoe (dimensionless)")
+
+    @model_validator(mode="after")
+    def _no_conflicts(self):
+        locked: dict[str, int] = {}
+        for i, lk in enumerate(self.locked):
+            for d in joint_dofs(lk.joint):
+                if d in locked:
+                    raise FieldProblem(("locked", i, "joint"), f"{d} is already locked by locked[{locked[d]}]")
+                locked[d] = i
+        seen: dict[str, int] = {}
+        for i, r in enumerate(self.range_of_motion):
+            if r.dof in seen:
+                raise FieldProblem(("range_of_motion", i, "dof"),
+                                   f"{r.dof} already has a range in range_of_motion[{seen[r.dof]}]")
+            seen[r.dof] = i
+            if r.dof in locked:
+                raise FieldProblem(("range_of_motion", i, "dof"), f"{r.dof} is locked by locked[{locked[r.dof]}]")
+        return self
+
+
+class StartSpec(_Model):
+    position: Point2 = Field((0.0, 0.0), description="pelvis position on the ground [x, y] (m) at t = 0")
+    heading: Degrees = Field(0.0, ge=-360.0, le=360.0, description="facing direction at t = 0 (deg, from +X)")
+
+
+class CharacterSpec(_Model):
+    name: Name = Field(description="unique character name (letters, digits, _)")
+    body: BodySpec = Field(default_factory=BodySpec, description="body preset and edits")
+    style: str = Field("default", min_length=1, max_length=512,
+                       description="bundled style name, or a style file path relative to the scenario file")
+    start: StartSpec = Field(default_factory=StartSpec, description="start position and heading")
+
+
+# --- goals ----------------------------------------------------------------------------------
+
+
+class Footprint(_Model):
+    foot: Literal["l", "r"] = Field(description="which foot")
+    position: Point2 = Field(description="where the foot is planted [x, y] (m): midpoint of its heel and ball")
+    heading: Degrees | None = Field(None, ge=-360.0, le=360.0, description="foot direction (deg); default: free")
+    time: Interval = Field(description="contact interval [heel strike, toe off] (s)")
+
+    check_time = field_validator("time")(_interval)
+
+
+class FootprintsGoal(_Model):
+    """Explicit footprints: where and when each foot is on the ground."""
+
+    type: Literal["footprints"]
+    name: Name | None = Field(None, description="goal name; default <type>_<index>")
+    character: str = Field(description="character name")
+    steps: list[Footprint] = Field(min_length=1, max_length=1000, description="footprints in any order")
+
+    @model_validator(mode="after")
+    def _no_overlap(self):
+        last: dict[str, tuple[int, tuple[float, float]]] = {}
+        for i, fp in sorted(enumerate(self.steps), key=lambda x: (x[1].foot, x[1].time[0], x[0])):
+            prev = last.get(fp.foot)
+            if prev is not None and fp.time[0] < prev[1][1]:
+                raise FieldProblem(("steps", i, "time"),
+                                   f"foot {fp.foot} is already on the ground until {prev[1][1]} s (steps[{prev[0]}])")
+            last[fp.foot] = (i, fp.time)
+        return self
+
+
+class WalkToGoal(_Model):
+    """Walk to a point by a time, footprints chosen by the optimisation."""
+
+    type: Literal["walk_to"]
+    name: Name | None = None
+    character: str = Field(description="character name")
+    target: Point2 = Field(description="where the pelvis ends [x, y] (m)")
+    time: Seconds = Field(description="arrival time (s)")
+    waypoints: list[Point2] = Field(default_factory=list, max_length=100,
+                                    description="optional path [x, y] points (m) passed in order")
+    heading: Degrees | None = Field(None, ge=-360.0, le=360.0, description="final facing (deg); default free")
+    tolerance: Num = Field(0.05, gt=0.0, le=10.0, description="allowed distance from the target (m)")
+
+
+class ReachGoal(_Model):
+    """Bring a handle to a point at a time."""
+
+    type: Literal["reach"]
+    name: Name | None = None
+    character: str
+    handle: str = Field(description="handle name, e.g. palm_r")
+    target: Point3 = Field(description="target point [x, y, z] (m)")
+    time: Seconds = Field(description="when the handle is at the target (s)")
+    tolerance: Num = Field(0.02, gt=0.0, le=10.0, description="allowed distance (m)")
+
+    check_handle = field_validator("handle")(_check_handle)
+
+
+class TackleGoal(_Model):
+    """Hit the target's torso at a time and speed, hands around it."""
+
+    type: Literal["tackle"]
+    name: Name | None = None
+    attacker: str = Field(description="character who tackles")
+    target: str = Field(description="character who is tackled")
+    time: Seconds = Field(description="impact time (s)")
+    min_speed: Num = Field(2.0, ge=0.0, le=15.0, description="attacker's chest speed toward the target at impact (m/s)")
+    hands_around_torso: Annotated[bool, Strict()] = Field(True, description="wrap both palms around the target's torso")
+    plans_last: str | None = Field(None, description="who optimises last in the decreasing-horizon schedule "
+                                                     "(attacker or target name); default: the attacker")
+
+
+class AvoidGoal(_Model):
+    """Stay outside a sphere around another character at a time."""
+
+    type: Literal["avoid"]
+    name: Name | None = None
+    character: str = Field(description="character who avoids")
+    around: str = Field(description="the character to keep away from")
+    radius: Num = Field(gt=0.0, le=20.0, description="sphere radius around the other's chest (m)")
+    time: Seconds = Field(description="when the distance must exceed the radius (s)")
+    plans_last: str | None = Field(None, description="who optimises last (one of the pair); default: the attacker")
+
+
+class StyleChangeGoal(_Model):
+    """Switch a character's style at a time (θ interpolated across the transition)."""
+
+    type: Literal["style_change"]
+    name: Name | None = None
+    character: str
+    time: Seconds = Field(description="middle of the transition (s)")
+    style: str = Field(min_length=1, max_length=512, description="new style: bundled name or file path")
+    blend: Num | None = Field(None, gt=0.0, le=60.0,
+                              description="transition length (s); default: the seam window of the time-layered schedule")
+
+
+Goal = Annotated[Union[FootprintsGoal, WalkToGoal, ReachGoal, TackleGoal, AvoidGoal, StyleChangeGoal],
+                 Field(discriminator="type")]
+
+# --- couplings ------------------------------------------------------------------------------
+
+
+class HandleRef(_Model):
+    character: str
+    handle: str = Field(description="handle name, e.g. palm_l")
+
+    check_handle = field_validator("handle")(_check_handle)
+
+
+class HandHold(_Model):
+    """Two characters hold hands (handles coincide) over an interval."""
+
+    type: Literal["hand_hold"]
+    name: Name | None = None
+    between: tuple[HandleRef, HandleRef] = Field(description="the two held handles")
+    interval: Interval
+
+    check_interval = field_validator("interval")(_interval)
+
+
+class Carry(_Model):
+    """Characters carry an object together: its weight is shared at their handles."""
+
+    type: Literal["carry"]
+    name: Name | None = None
+    mass: Num = Field(gt=0.0, le=500.0, description="object mass (kg)")
+    holders: list[HandleRef] = Field(min_length=2, max_length=8, description="the handles that hold the object")
+    interval: Interval
+
+    check_interval = field_validator("interval")(_interval)
+
+
+Coupling = Annotated[Union[HandHold, Carry], Field(discriminator="type")]
+
+# --- schedule -------------------------------------------------------------------------------
+
+
+class ScheduleSpec(_Model):
+    """Override or tune the schedule the compiler would choose (thesis §6.4)."""
+
+    kind: Literal["auto", "timewarp", "time_layered", "coupled", "decreasing_horizon"] = Field(
+        "auto", description="auto: derived from the scenario; otherwise forced for all characters")
+    cycles: int | None = Field(None, ge=1, le=50, description="schedule cycles; default per kind "
+                                                              "(time_layered 2, coupled 4, decreasing_horizon 3)")
+    timewarp: Annotated[bool, Strict()] = Field(True, description="solve timing with relaxed dynamics before each full solve")
+    max_window: Num = Field(2.5, gt=0.1, le=600.0, description="longest window of one subproblem (s)")
+    seam: Num | None = Field(None, gt=0.0, le=600.0, description="width of the seam window C (s); default: "
+                                                                 "half of the shorter neighbour on each side")
+    stiffness_start: Num = Field(100.0, gt=0.0, le=1e9, description="rubber-band stiffness in cycle 1 (N/m)")
+    stiffness_increase: Num = Field(100.0, ge=0.0, le=1e9, description="added to the stiffness every cycle (N/m)")
+    stiffness_factor: Num = Field(1.0, ge=1.0, le=100.0, description="multiplies the stiffness every cycle")
+    solves_per_cycle: dict[str, Annotated[int, Strict(), Field(ge=1, le=10)]] = Field(
+        default_factory=dict, description="how often each character is solved per coupled cycle (who adapts more)")
+
+    def stiffness(self, cycle: int) -> float:
+        """Rubber-band stiffness (N/m) in cycle ``cycle`` (1-based); rises monotonically."""
+        c = cycle - 1
+        return (self.stiffness_start + self.stiffness_increase * c) * self.stiffness_factor ** c
+
+
+# --- the scenario ---------------------------------------------------------------------------
+
+
+def _goal_refs(g) -> list[tuple[str, str]]:
+    """(field, character name) pairs a goal refers to."""
+    if isinstance(g, TackleGoal):
+        return [("attacker", g.attacker), ("target", g.target)]
+    if isinstance(g, AvoidGoal):
+        return [("character", g.character), ("around", g.around)]
+    return [("character", g.character)]
+
+
+def _goal_times(g) -> list[tuple[tuple, float]]:
+    if isinstance(g, FootprintsGoal):
+        out = []
+        for i, fp in enumerate(g.steps):
+            out += [(("steps", i, "time"), fp.time[0]), (("steps", i, "time"), fp.time[1])]
+        return out
+    return [(("time",), g.time)]
+
+
+class Scenario(_Model):
+    """A scenario: characters, their goals and couplings, in an environment, over a duration."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
+                              json_schema_extra={"$id": "https://compose.invalid/scenario.schema.json",
+                                                 "title": "compose scenario"})
+
+    version: Literal[1] = Field(1, description="scenario format version")
+    name: Name = Field(description="scenario name")
+    description: str = Field("", max_length=200, description="one line shown by `compose list`")
+    duration: Num = Field(gt=0.0, le=600.0, description="length of the scenario (s); with free timing the initial guess")
+    timing: Literal["fixed", "free"] = Field(
+        "fixed", description="free: the timewarp may stretch the whole scenario within duration_bounds; "
+                             "goal times are then canonical (they move with the motion)")
+    duration_bounds: tuple[Num, Num] | None = Field(None, description="[min, max] total duration (s) with free timing")
+    environment: Environment = Field(default_factory=Environment)
+    characters: list[CharacterSpec] = Field(min_length=1, max_length=16)
+    goals: list[Goal] = Field(default_factory=list, max_length=1000)
+    couplings: list[Coupling] = Field(default_factory=list, max_length=100)
+    schedule: ScheduleSpec | None = Field(None, description="explicit schedule; default: compiled from the scenario")
+
+    _base_dir: Path | None = PrivateAttr(None)
+    _source: str | None = PrivateAttr(None)
+
+    # -- accessors -----------------------------------------------------------------------
+    @property
+    def source(self) -> str | None:
+        """The file this scenario was loaded from, if any."""
+        return self._source
+
+    @property
+    def base_dir(self) -> Path | None:
+        """The folder style paths are resolved against (the scenario file's folder)."""
+        return self._base_dir
+
+    def character(self, name: str) -> CharacterSpec:
+        for c in self.characters:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    @property
+    def character_names(self) -> list[str]:
+        return [c.name for c in self.characters]
+
+    def goal_name(self, index: int) -> str:
+        g = self.goals[index]
+        return g.name or f"{g.type}_{index}"
+
+    def coupling_name(self, index: int) -> str:
+        c = self.couplings[index]
+        return c.name or f"{c.type}_{index}"
+
+    def named_goals(self) -> list[tuple[str, Any]]:
+        return [(self.goal_name(i), g) for i, g in enumerate(self.goals)]
+
+    def named_couplings(self) -> list[tuple[str, Any]]:
+        return [(self.coupling_name(i), c) for i, c in enumerate(self.couplings)]
+
+    def coupling_characters(self, index: int) -> list[str]:
+        c = self.couplings[index]
+        refs = c.between if isinstance(c, HandHold) else c.holders
+        return list(dict.fromkeys(r.character for r in refs))
+
+    def style_timeline(self, character: str) -> list[tuple[float, str, float | None]]:
+        """[(time s, style ref, blend s or None)], starting with (0, initial style, None), sorted by time."""
+        out = [(0.0, self.character(character).style, None)]
+        changes = sorted((g.time, g.style, g.blend) for g in self.goals
+                         if isinstance(g, StyleChangeGoal) and g.character == character)
+        return out + changes
+
+    def style_file(self, ref: str) -> Path | None:
+        """The YAML file of a style reference; None for the built-in ``default`` style."""
+        from .bundled import resolve_style  # local: bundled imports this module
+        return resolve_style(ref, self._base_dir)
+
+    # -- cross-field checks ----------------------------------------------------------------
+    @field_validator("duration_bounds")
+    @classmethod
+    def _bounds(cls, v):
+        if v is not None and not (0 < v[0] < v[1]):
+            raise ValueError(f"expected 0 < min < max, got {list(v)}")
+        return v
+
+    @model_validator(mode="after")
+    def _cross_check(self, info: ValidationInfo):
+        problems = self.problems(info.context)
+        if problems:
+            path, msg = problems[0]
+            raise FieldProblem(path, msg, more=problems[1:])
+        ctx = info.context or {}
+        if ctx.get("base_dir") is not None:
+            self._base_dir = Path(ctx["base_dir"])
+        if ctx.get("file") is not None:
+            self._source = str(ctx["file"])
+        return self
+
+    def problems(self, context: dict | None = None) -> list[tuple[tuple, str]]:
+        """Every cross-field problem as (field path, message), in file order."""
+        from .bundled import style_problem  # local: bundled imports this module
+        ctx = context or {}
+        out: list[tuple[tuple, str]] = []
+        T = self.duration
+        if self.duration_bounds is not None:
+            lo, hi = self.duration_bounds
+            if self.timing != "free":
+                out.append((("duration_bounds",), "duration_bounds needs timing: free"))
+            elif not (lo <= T <= hi):
+                out.append((("duration",), f"duration {T} s lies outside duration_bounds [{lo}, {hi}] s"))
+
+        names: dict[str, int] = {}
+        for i, c in enumerate(self.characters):
+            if c.name in names:
+                out.append((("characters", i, "name"),
+                            f"duplicate character name {c.name!r} (also characters[{names[c.name]}])"))
+            names.setdefault(c.name, i)
+            msg = style_problem(c.style, ctx)
+            if msg:
+                out.append((("characters", i, "style"), msg))
+
+        def ref(path: tuple, name: str):
+            if name not in names:
+                out.append((path, suggest(name, list(names), "character")))
+                return False
+            return True
+
+        def in_time(path: tuple, t: float):
+            if not (0.0 <= t <= T):
+                out.append((path, f"time {t} s is outside the scenario [0, {T}] s"))
+
+        item_names: dict[str, str] = {}
+
+        def unique(path: tuple, name: str | None, where: str):
+            if name is None:
+                return
+            if name in item_names:
+                out.append((path, f"duplicate name {name!r} (also {item_names[name]})"))
+            item_names.setdefault(name, where)
+
+        pairs: dict[frozenset, tuple[str, str]] = {}
+        changes: dict[tuple[str, float], int] = {}
+        for j, g in enumerate(self.goals):
+            base = ("goals", j)
+            unique(base + ("name",), g.name, f"goals[{j}]")
+            ok = all([ref(base + (f,), n) for f, n in _goal_refs(g)])
+            for p, t in _goal_times(g):
+                in_time(base + p, t)
+            if isinstance(g, (TackleGoal, AvoidGoal)):
+                a, b = (g.attacker, g.target) if isinstance(g, TackleGoal) else (g.around, g.character)
+                if a == b:
+                    field = "target" if isinstance(g, TackleGoal) else "around"
+                    out.append((base + (field,), f"{g.type} needs two different characters, got {a!r} twice"))
+                    continue
+                if g.plans_last is not None:
+                    if g.plans_last not in (a, b):
+                        out.append((base + ("plans_last",),
+                                    f"plans_last must be {a!r} or {b!r}, got {g.plans_last!r}"))
+                        continue
+                    key = frozenset((a, b))
+                    if key in pairs and pairs[key][0] != g.plans_last:
+                        out.append((base + ("plans_last",), f"plans_last {g.plans_last!r} contradicts "
+                                    f"{pairs[key][1]} which says {pairs[key][0]!r}"))
+                    pairs.setdefault(key, (g.plans_last, f"goals[{j}]"))
+            if isinstance(g, StyleChangeGoal):
+                msg = style_problem(g.style, ctx)
+                if msg:
+                    out.append((base + ("style",), msg))
+                if ok:
+                    k = (g.character, g.time)
+                    if k in changes:
+                        out.append((base + ("time",), f"{g.character} already changes style at {g.time} s "
+                                    f"(goals[{changes[k]}])"))
+                    changes.setdefault(k, j)
+                    if g.time <= 0.0 or g.time >= T:
+                        out.append((base + ("time",), f"a style change must lie strictly inside (0, {T}) s"))
+
+        for j, c in enumerate(self.couplings):
+            base = ("couplings", j)
+            unique(base + ("name",), c.name, f"couplings[{j}]")
+            refs = c.between if isinstance(c, HandHold) else c.holders
+            field = "between" if isinstance(c, HandHold) else "holders"
+            seen: dict[tuple[str, str], int] = {}
+            for k, r in enumerate(refs):
+                ref(base + (field, k, "character"), r.character)
+                key = (r.character, r.handle)
+                if key in seen:
+                    out.append((base + (field, k, "handle"), f"{r.character}.{r.handle} is listed twice"))
+                seen.setdefault(key, k)
+            if isinstance(c, HandHold) and c.between[0].character == c.between[1].character:
+                out.append((base + (field, 1, "character"), "hand_hold needs two different characters"))
+            in_time(base + ("interval",), c.interval[0])
+            in_time(base + ("interval",), c.interval[1])
+
+        if self.schedule is not None:
+            for who in self.schedule.solves_per_cycle:
+                ref(("schedule", "solves_per_cycle", who), who)
+        return out
