@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from scenarios.errors import InputError, Location
 from scenarios.yamlio import dump_yaml_atomic, load_model
@@ -29,6 +29,7 @@ from .body import JOINT_DOF_NAMES, N_JOINT
 __all__ = ["Style", "default_style", "load_style", "save_style", "PER_DOF_FIELDS"]
 
 PER_DOF_FIELDS = ("alpha", "ks1", "ks2", "kd", "q_rest")
+ALPHA_SUM_TOL = 1e-3  # hand-written files round; files written by save_style sum to 1 within 1e-7
 
 
 class Provenance(BaseModel):
@@ -82,15 +83,10 @@ class Style(BaseModel):
             raise ValueError(f"must be >= 0, but {JOINT_DOF_NAMES[j]} is {arr[j]}")
         if name == "q_rest" and np.any(np.abs(arr) > np.pi):
             raise ValueError("rest angles must lie in [-pi, pi] rad")
+        if name == "alpha" and abs(float(np.sum(arr)) - 1.0) > ALPHA_SUM_TOL:
+            raise ValueError(f"must sum to 1 (sums to {float(np.sum(arr)):.6g})")
         arr.setflags(write=False)
         return arr
-
-    @model_validator(mode="after")
-    def _alpha_sum(self):
-        s = float(np.sum(self.alpha))
-        if not (0.5 < s < 2.0):
-            raise ValueError(f"alpha must sum to 1 (sums to {s:.4g})")
-        return self
 
     def vector(self) -> np.ndarray:
         """θ as one flat array (147,) in the order alpha, ks1, ks2, kd, q_rest, k_shoe, h_rest."""
@@ -103,7 +99,7 @@ class Style(BaseModel):
         return cls(name=name, **parts, k_shoe=float(t[-2]), h_rest=float(t[-1]), provenance=provenance)
 
     def with_(self, **changes) -> "Style":
-        data = {f: getattr(self, f) for f in self.model_fields}
+        data = {f: getattr(self, f) for f in type(self).model_fields}
         data.update(changes)
         return Style(**data)
 
