@@ -67,31 +67,33 @@ def _fallback(f: ca.Function, why: str) -> ca.Function:
     return f
 
 
-def _key(f: ca.Function, cc: list[str]) -> str:
+def _key(f: ca.Function, cc: list[str], with_jacobian: bool = False) -> str:
     h = hashlib.sha256()
-    for part in (f.serialize(), ca.__version__, " ".join(cc), " ".join(FLAGS)):
+    for part in (f.serialize(), ca.__version__, " ".join(cc), " ".join(FLAGS), "jac" if with_jacobian else ""):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
 
 
-def library_path(f: ca.Function, name: str | None = None) -> Path | None:
+def library_path(f: ca.Function, name: str | None = None, with_jacobian: bool = False) -> Path | None:
     """Where the compiled library of ``f`` is (or would be) cached; None without a compiler."""
     cc = _compiler()
     if cc is None:
         return None
-    return cache_dir() / f"{name or f.name()}-{_key(f, cc)[:24]}.so"
+    return cache_dir() / f"{name or f.name()}-{_key(f, cc, with_jacobian)[:24]}.so"
 
 
-def compiled(f: ca.Function, name: str | None = None) -> ca.Function:
+def compiled(f: ca.Function, name: str | None = None, with_jacobian: bool = False) -> ca.Function:
     """``f`` as compiled C code loaded with ``casadi.external`` (cached on disk; see module doc).
 
-    ``name`` only labels the cached file (default ``f.name()``).  Returns ``f`` itself when
-    code generation is disabled or impossible.
+    ``name`` only labels the cached file (default ``f.name()``).  ``with_jacobian`` also
+    compiles ``f``'s Jacobian, so CasADi can take *first* derivatives of the loaded function
+    (gradients, Jacobians); second derivatives of a compiled function are not available.
+    Returns ``f`` itself when code generation is disabled or impossible.
     """
     if os.environ.get("COMPOSE_NO_CODEGEN", "") not in ("", "0"):
         return f
-    lib = library_path(f, name)
+    lib = library_path(f, name, with_jacobian)
     if lib is None:
         return _fallback(f, "no C compiler found (set CC or install gcc)")
     if str(lib) in _loaded:
@@ -99,7 +101,7 @@ def compiled(f: ca.Function, name: str | None = None) -> ca.Function:
     if not lib.exists():
         try:
             lib.parent.mkdir(parents=True, exist_ok=True)
-            _build(f, _compiler(), lib)
+            _build(f, _compiler(), lib, with_jacobian)
         except (OSError, subprocess.SubprocessError) as exc:
             detail = str(exc).strip().splitlines()
             return _fallback(f, f"compiling {lib.name} failed ({detail[-1] if detail else type(exc).__name__})")
@@ -113,13 +115,15 @@ def compiled(f: ca.Function, name: str | None = None) -> ca.Function:
     return g
 
 
-def _build(f: ca.Function, cc: list[str], lib: Path) -> None:
+def _build(f: ca.Function, cc: list[str], lib: Path, with_jacobian: bool = False) -> None:
     """Generate C for ``f`` and compile it to ``lib`` via a temporary file and a rename."""
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="compose-cg-") as tmp:
         src = f"{f.name()}.c"
         gen = ca.CodeGenerator(src, {"with_header": False})
         gen.add(f)
+        if with_jacobian:
+            gen.add(f.jacobian())
         gen.generate(tmp + os.sep)
         fd, partial = tempfile.mkstemp(prefix=f".{lib.name}.", suffix=".tmp", dir=lib.parent)
         os.close(fd)
