@@ -84,7 +84,9 @@ def validate_scenario(data: Any, positions: Positions, file: str | None = None,
     """Validate parsed YAML data; the first problem becomes an InputError with file:line:col."""
     ctx = validation_context(file, base_dir)
     try:
-        return Scenario.model_validate(data, context=ctx)
+        scn = Scenario.model_validate(data, context=ctx)
+        scn._positions = dict(positions)
+        return scn
     except ValidationError as exc:
         errors = exc.errors(include_url=False)
         described = [_describe(e, data) for e in errors]

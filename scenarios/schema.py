@@ -470,12 +470,18 @@ class Scenario(_Model):
 
     _base_dir: Path | None = PrivateAttr(None)
     _source: str | None = PrivateAttr(None)
+    _positions: dict = PrivateAttr(default_factory=dict)
 
     # -- accessors -----------------------------------------------------------------------
     @property
     def source(self) -> str | None:
         """The file this scenario was loaded from, if any."""
         return self._source
+
+    def location(self, path: tuple):
+        """Where a field path (``("characters", 1, "style")``) sits in the source file."""
+        from .yamlio import error_location  # local: keeps the schema importable on its own
+        return error_location(self._source, self._positions, tuple(path))
 
     @property
     def base_dir(self) -> Path | None:

@@ -1,0 +1,474 @@
+"""The schedule compiler: from a scenario's structure to a Schedule (thesis §6.4, §6.5).
+
+How the schedule is chosen (``schedule.kind: auto``, the default):
+
+1. Characters interact through couplings (hand_hold, carry) and adversarial goals
+   (tackle, avoid).  Each connected component of that interaction graph is an independent
+   branch of the schedule: no edges between branches, so they may run in parallel.
+2. Per branch:
+   * a tackle/avoid pair in it → **decreasing horizon**: characters alternate, those that
+     plan last (``plans_last``; default the attacker) after the others; in cycle k the
+     optimised interval is [t_e·(1 − 2^(1−k)), T] with t_e the latest adversarial time, so
+     the time left before the event halves every cycle; couplings inside the branch are
+     rubber bands whose stiffness rises every cycle;
+   * otherwise a coupling in it → **coupled characters**: characters alternate (sorted
+     names; ``solves_per_cycle`` repeats some), each coupling a rubber band whose stiffness
+     rises every cycle (``stiffness_start``, ``+stiffness_increase``, ``×stiffness_factor``);
+   * otherwise one character alone.
+   Single and coupled branches are **time-layered** when the duration exceeds
+   ``max_window`` or a style changes over time: windows abut at every style change and
+   are split to at most ``max_window``; each cycle solves the windows, then a seam window C
+   straddling every boundary; θ is interpolated linearly across the seam (or across the
+   style change's ``blend``).
+3. Every subproblem uses the **timewarp** schedule: a ``timing`` Step (timewarp and free
+   placements, dynamics relaxed) then a ``full`` Step (dynamics hard).
+
+An explicit ``schedule.kind`` overrides step 2: ``timewarp`` solves each branch jointly in
+one subproblem (couplings hard), ``time_layered`` solves each branch jointly per window,
+``coupled`` and ``decreasing_horizon`` put *all* characters in one branch of that kind.
+
+Edges are derived from data dependencies in program order: a Step runs after every earlier
+Step of its branch that writes what it reads or writes, or reads what it writes (characters
+× overlapping windows); the graph is then transitively reduced.  Ties are broken by
+sorted names, so the same scenario always gives the same graph.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import networkx as nx
+
+from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachGoal, Scenario, ScheduleSpec,
+                              StyleChangeGoal, TackleGoal, WalkToGoal)
+
+from .step import (COUPLED, DECREASING_HORIZON, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
+                   Group, Schedule, Step, StyleTimeline)
+
+__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows"]
+
+DEFAULT_CYCLES = {TIME_LAYERED: 2, COUPLED: 4, DECREASING_HORIZON: 3}
+EPS = 1e-9
+
+
+@dataclass
+class _Block:
+    """One subproblem before it is split into timing/full Steps."""
+
+    characters: tuple[str, ...]
+    window: tuple[float, float]
+    cycle: int
+    role: str
+    label: str
+    schedules: tuple[str, ...]
+    observes: tuple[str, ...] = ()
+    couplings: str = "spring"  # "spring" (rubber band at `stiffness`) or "hard"
+    stiffness: float | None = None
+    seam: float | None = None
+    repeat: int = 1
+    steps: list[Step] = field(default_factory=list)
+
+    def reads(self) -> set[str]:
+        return set(self.characters) | set(self.observes)
+
+    def writes(self) -> set[str]:
+        return set(self.characters)
+
+
+def _overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    return a[0] < b[1] - EPS and b[0] < a[1] - EPS
+
+
+def _touches(t: float, w: tuple[float, float]) -> bool:
+    return w[0] - EPS <= t <= w[1] + EPS
+
+
+def _interval_meets(iv: tuple[float, float], w: tuple[float, float]) -> bool:
+    return iv[0] <= w[1] + EPS and w[0] <= iv[1] + EPS
+
+
+def _fmt(t: float) -> str:
+    return f"{t:g}"
+
+
+# --- windows --------------------------------------------------------------------------------
+
+
+def layer_windows(T: float, boundaries: list[float], max_window: float,
+                  seam: float | None = None) -> tuple[list[tuple[float, float]], list[tuple[float, float, float]]]:
+    """Windows abutting at ``boundaries`` (and split to ≤ max_window), and seams (c0, c1, t).
+
+    The seam window C around a boundary t between windows [a, t] and [t, b] has half-width
+    min(t − a, b − t)/2, or ``seam``/2 clipped to that range.
+    """
+    cuts = sorted({0.0, T, *[b for b in boundaries if EPS < b < T - EPS]})
+    points: list[float] = [0.0]
+    for a, b in zip(cuts, cuts[1:]):
+        n = max(1, math.ceil((b - a) / max_window - 1e-9))
+        points += [a + (b - a) * k / n for k in range(1, n + 1)]
+    windows = list(zip(points, points[1:]))
+    seams = []
+    for (a, t), (_, b) in zip(windows, windows[1:]):
+        h = min(t - a, b - t) / 2.0
+        if seam is not None:
+            h = min(seam / 2.0, min(t - a, b - t))
+        seams.append((t - h, t + h, t))
+    return windows, seams
+
+
+# --- the scenario's structure ----------------------------------------------------------------
+
+
+@dataclass
+class _Structure:
+    scn: Scenario
+    spec: ScheduleSpec
+    names: list[str]
+    graph: nx.Graph  # characters; edges carry "couplings" and "adversarial" name lists
+    goals_of: dict[str, list[tuple[str, object]]]
+    couplings_of: dict[str, list[tuple[str, object, list[str]]]]
+    impacts_of: dict[str, list[tuple[str, TackleGoal]]]
+    plans_last: set[str]
+    style_changes: dict[str, list[StyleChangeGoal]]
+
+
+def _structure(scn: Scenario) -> _Structure:
+    spec = scn.schedule or ScheduleSpec()
+    names = sorted(scn.character_names)
+    g = nx.Graph()
+    g.add_nodes_from(names)
+
+    def link(a: str, b: str, key: str, label: str):
+        if not g.has_edge(a, b):
+            g.add_edge(a, b, couplings=[], adversarial=[])
+        g.edges[a, b][key].append(label)
+
+    goals_of: dict[str, list] = {n: [] for n in names}
+    impacts_of: dict[str, list] = {n: [] for n in names}
+    style_changes: dict[str, list] = {n: [] for n in names}
+    pair_last: dict[frozenset, list[tuple[str | None, str]]] = {}
+    for gname, goal in scn.named_goals():
+        if isinstance(goal, TackleGoal):
+            goals_of[goal.attacker].append((gname, goal))
+            impacts_of[goal.target].append((gname, goal))
+            link(goal.attacker, goal.target, "adversarial", gname)
+            pair_last.setdefault(frozenset((goal.attacker, goal.target)), []).append((goal.plans_last, goal.attacker))
+        elif isinstance(goal, AvoidGoal):
+            goals_of[goal.character].append((gname, goal))
+            link(goal.character, goal.around, "adversarial", gname)
+            pair_last.setdefault(frozenset((goal.character, goal.around)), []).append((goal.plans_last, goal.around))
+        elif isinstance(goal, StyleChangeGoal):
+            style_changes[goal.character].append(goal)
+        else:
+            goals_of[goal.character].append((gname, goal))
+    couplings_of: dict[str, list] = {n: [] for n in names}
+    for i, (cname, c) in enumerate(scn.named_couplings()):
+        members = sorted(scn.coupling_characters(i))
+        for m in members:
+            couplings_of[m].append((cname, c, members))
+        for a_i, a in enumerate(members):
+            for b in members[a_i + 1:]:
+                link(a, b, "couplings", cname)
+    for v in style_changes.values():
+        v.sort(key=lambda s: s.time)
+    # per adversarial pair: the explicit plans_last (validated consistent), else the attacker
+    # (tackle) or the one avoided (avoid)
+    plans_last: set[str] = set()
+    for choices in pair_last.values():
+        explicit = sorted({c for c, _ in choices if c is not None})
+        plans_last.add(explicit[0] if explicit else sorted(d for _, d in choices)[0])
+    return _Structure(scn, spec, names, g, goals_of, couplings_of, impacts_of, plans_last, style_changes)
+
+
+def _style_timeline(st: _Structure, ch: str, seams: dict[float, tuple[float, float]]) -> StyleTimeline:
+    """θ keys of one character; blends span the seam window at each change (or ``blend``)."""
+    T = st.scn.duration
+    spec_ch = st.scn.character(ch)
+    keys: list[tuple[float, str]] = [(0.0, spec_ch.style)]
+    changes = st.style_changes[ch]
+    current = spec_ch.style
+    times = [0.0] + [c.time for c in changes] + [T]
+    for k, c in enumerate(changes):
+        if c.blend is not None:
+            b0, b1 = c.time - c.blend / 2.0, c.time + c.blend / 2.0
+        elif c.time in seams:
+            b0, b1 = seams[c.time]
+        else:
+            h = min(c.time - times[k], times[k + 2] - c.time) / 2.0
+            b0, b1 = c.time - h, c.time + h
+        b0 = max(b0, keys[-1][0], 0.0)
+        b1 = min(max(b1, b0), T)
+        keys += [(b0, current), (b1, c.style)]
+        current = c.style
+    # drop a leading duplicate (0, s), (0, s)
+    out: list[tuple[float, str]] = []
+    for k in keys:
+        if not out or out[-1] != k:
+            out.append(k)
+    return StyleTimeline(ch, tuple((float(t), s) for t, s in out))
+
+
+# --- blocks → steps -----------------------------------------------------------------------------
+
+
+def _free_footprints(st: _Structure, ch: str, window: tuple[float, float]) -> bool:
+    """Footprints are free unless explicit footprints cover the window."""
+    for _, g in st.goals_of[ch]:
+        if isinstance(g, FootprintsGoal) and any(_overlap(fp.time, window) or
+                                                 (fp.time[0] <= window[0] and window[1] <= fp.time[1])
+                                                 for fp in g.steps):
+            return False
+    return True
+
+
+def _goal_active(goal, window: tuple[float, float]) -> bool:
+    if isinstance(goal, FootprintsGoal):
+        return any(_interval_meets(fp.time, window) for fp in goal.steps)
+    if isinstance(goal, (WalkToGoal, ReachGoal, TackleGoal, AvoidGoal)):
+        return _touches(goal.time, window)
+    return False
+
+
+def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ...]:
+    T = st.scn.duration
+    w = b.window
+    terms: list[tuple[str, object]] = [("energy", 1.0), ("dynamics", RELAXED if kind == TIMING else HARD),
+                                       ("environment", HARD)]
+    if w[0] <= EPS:
+        terms.append(("start", HARD))
+    else:
+        terms.append(("boundary:start", HARD))
+    if w[1] < T - EPS:
+        terms.append(("boundary:end", HARD))
+    goals: dict[str, object] = {}
+    couplings: dict[str, object] = {}
+    for ch in b.characters:
+        for gname, goal in st.goals_of[ch]:
+            if _goal_active(goal, w):
+                goals[f"goal:{gname}"] = HARD
+        for gname, goal in st.impacts_of[ch]:
+            if _touches(goal.time, w):
+                goals[f"impact:{gname}"] = HARD
+        for cname, c, members in st.couplings_of[ch]:
+            if _interval_meets(c.interval, w):
+                couplings[f"coupling:{cname}"] = HARD if b.couplings == "hard" else b.stiffness
+    terms += sorted(goals.items()) + sorted(couplings.items())
+    return tuple(terms)
+
+
+def _free(st: _Structure, b: _Block, kind: str, timewarp: bool, has_hard_coupling: bool) -> tuple[str, ...]:
+    free = ["q"]
+    if kind == TIMING or not timewarp:
+        free.append("timewarp")
+        if st.scn.timing == "free" and b.window[1] >= st.scn.duration - EPS:
+            free.append("duration")
+    if any(_free_footprints(st, ch, b.window) for ch in b.characters):
+        free.append("footprints")
+    if kind == FULL:
+        free.append("lambda")
+        if has_hard_coupling:
+            free.append("coupling_forces")
+    return tuple(free)
+
+
+def _steps_of(st: _Structure, b: _Block, group: str, styles: dict[str, StyleTimeline]) -> list[Step]:
+    timewarp = st.spec.timewarp
+    kinds = [TIMING, FULL] if timewarp else [FULL]
+    chars = "+".join(b.characters)
+    rep = f"#{b.repeat}" if b.repeat > 1 else ""
+    out = []
+    for kind in kinds:
+        terms = _terms(st, b, kind)
+        hard_coupling = any(n.startswith("coupling:") and v == HARD for n, v in terms)
+        has_spring = any(n.startswith("coupling:") and v != HARD for n, v in terms)
+        out.append(Step(
+            id=f"{chars}/c{b.cycle}/{b.label}{rep}/{kind}",
+            kind=kind,
+            characters=b.characters,
+            window=(float(b.window[0]), float(b.window[1])),
+            free=_free(st, b, kind, timewarp, hard_coupling),
+            terms=terms,
+            cycle=b.cycle,
+            schedules=b.schedules + ((TIMEWARP,) if timewarp else ()),
+            role=b.role,
+            group=group,
+            observes=b.observes,
+            styles=tuple(styles[c] for c in b.characters),
+            seam=b.seam,
+            stiffness=b.stiffness if has_spring else None,
+            repeat=b.repeat,
+        ))
+    return out
+
+
+# --- per-branch programs -------------------------------------------------------------------------
+
+
+def _observed(st: _Structure, ch: str, members: list[str], window: tuple[float, float]) -> tuple[str, ...]:
+    """Partners and opponents of ``ch`` in the branch whose motion enters its subproblem."""
+    out = set()
+    for _, c, ms in st.couplings_of[ch]:
+        if _interval_meets(c.interval, window):
+            out |= set(ms)
+    for a, b, data in st.graph.edges(ch, data=True):
+        if data["adversarial"]:
+            out.add(b if a == ch else a)
+    out.discard(ch)
+    return tuple(sorted(out & set(members)))
+
+
+def _solve_order(st: _Structure, members: list[str], adversarial: bool) -> list[str]:
+    if not adversarial:
+        return sorted(members)
+    return sorted(members, key=lambda n: (n in st.plans_last, n))
+
+
+def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block], Group]:
+    """Blocks in program order for one branch; mode: single|coupled|adversarial|joint|joint_layered."""
+    scn, spec = st.scn, st.spec
+    T = scn.duration
+    reasons: list[str] = []
+    changes = sorted({c.time for m in members for c in st.style_changes[m]})
+    for m in members:
+        for c in st.style_changes[m]:
+            reasons.append(f"style of {m} changes to {c.style!r} at {_fmt(c.time)} s")
+    edges = [(a, b, d) for a, b, d in st.graph.subgraph(members).edges(data=True)]
+    for a, b, d in sorted(edges):
+        for cn in d["couplings"]:
+            reasons.append(f"coupling {cn!r} links {a} and {b}")
+        for gn in d["adversarial"]:
+            reasons.append(f"adversarial goal {gn!r} between {a} and {b}")
+
+    layered = mode == "joint_layered" or (mode in ("single", "coupled") and (T > spec.max_window + EPS or changes))
+    if layered:
+        if T > spec.max_window + EPS:
+            reasons.append(f"duration {_fmt(T)} s exceeds max_window {_fmt(spec.max_window)} s")
+        windows, seams = layer_windows(T, changes, spec.max_window, spec.seam)
+    else:
+        windows, seams = [(0.0, T)], []
+    if mode == "adversarial" and (changes or T > spec.max_window + EPS):
+        reasons.append("not time-layered: the decreasing horizon already restricts the windows")
+
+    kinds: list[str] = []
+    if mode == "coupled":
+        kinds.append(COUPLED)
+    if mode == "adversarial":
+        kinds.append(DECREASING_HORIZON)
+    if mode in ("joint", "joint_layered") and len(members) > 1:
+        kinds.append(JOINT)
+    if layered:
+        kinds.append(TIME_LAYERED)
+    alternating = mode in ("coupled", "adversarial")
+    if mode == "adversarial":
+        cycles = spec.cycles or DEFAULT_CYCLES[DECREASING_HORIZON]
+    elif mode == "coupled":
+        cycles = spec.cycles or DEFAULT_CYCLES[COUPLED]
+    elif layered:
+        cycles = spec.cycles or DEFAULT_CYCLES[TIME_LAYERED]
+    else:
+        cycles = 1
+    order = _solve_order(st, members, mode == "adversarial") if alternating else sorted(members)
+    if alternating:
+        k1, kn = spec.stiffness(1), spec.stiffness(cycles)
+        if any(d["couplings"] for _, _, d in edges):
+            reasons.append(f"rubber-band couplings: stiffness {k1:g} → {kn:g} N/m over {cycles} cycles")
+    if mode == "adversarial":
+        last = [m for m in order if m in st.plans_last]
+        reasons.append(f"plans last: {', '.join(last) or order[-1]}")
+
+    t_event = max([g.time for m in members for _, g in st.goals_of[m] if isinstance(g, (TackleGoal, AvoidGoal))],
+                  default=T)
+    reps = {m: spec.solves_per_cycle.get(m, 1) if mode == "coupled" else 1 for m in members}
+    sched = tuple(kinds)
+    blocks: list[_Block] = []
+    for cycle in range(1, cycles + 1):
+        stiffness = spec.stiffness(cycle) if alternating else None
+        if mode == "adversarial":
+            t0 = t_event * (1.0 - 2.0 ** (1 - cycle))
+            slots = [((t0, T), "horizon", "horizon", None)]
+        else:
+            slots = [(w, "whole" if len(windows) == 1 else "window", "whole" if len(windows) == 1 else f"w{i}", None)
+                     for i, w in enumerate(windows)]
+            slots += [((c0, c1), "seam", f"seam{i}", t) for i, (c0, c1, t) in enumerate(seams)]
+        for window, role, label, seam_t in slots:
+            if alternating:
+                for r in range(1, max(reps.values()) + 1):
+                    for m in order:
+                        if reps[m] >= r:
+                            blocks.append(_Block((m,), window, cycle, role, label, sched,
+                                                 observes=_observed(st, m, members, window),
+                                                 stiffness=stiffness, seam=seam_t, repeat=r))
+            elif mode in ("joint", "joint_layered"):
+                blocks.append(_Block(tuple(sorted(members)), window, cycle, role, label, sched,
+                                     couplings="hard", seam=seam_t))
+            else:
+                blocks.append(_Block((members[0],), window, cycle, role, label, sched, seam=seam_t))
+    name = "+".join(sorted(members))
+    group = Group(name, tuple(sorted(members)), sched + ((TIMEWARP,) if spec.timewarp else ()),
+                  tuple(reasons), tuple(order))
+    return blocks, group
+
+
+def _edges(blocks: list[_Block]) -> list[tuple[str, str]]:
+    """Data-dependency edges between blocks in program order (last step → first step)."""
+    edges: list[tuple[str, str]] = []
+    for j, b in enumerate(blocks):
+        for a in blocks[:j]:
+            if not _overlap(a.window, b.window):
+                continue
+            if (a.writes() & b.reads()) or (a.reads() & b.writes()):
+                edges.append((a.steps[-1].id, b.steps[0].id))
+        edges += [(x.id, y.id) for x, y in zip(b.steps, b.steps[1:])]
+    return edges
+
+
+def compile_schedule(scn: Scenario) -> Schedule:
+    """The Schedule of a scenario: independent branches of timewarp-scheduled subproblems."""
+    st = _structure(scn)
+    kind = st.spec.kind
+    notes: list[str] = []
+    if kind in (COUPLED, DECREASING_HORIZON):
+        components = [sorted(st.names)]
+        notes.append(f"explicit schedule {kind!r}: all characters in one branch")
+    else:
+        components = sorted((sorted(c) for c in nx.connected_components(st.graph)), key=lambda c: c[0])
+        if kind != "auto":
+            notes.append(f"explicit schedule {kind!r}")
+
+    all_steps: list[Step] = []
+    all_edges: list[tuple[str, str]] = []
+    groups: list[Group] = []
+    for members in components:
+        sub = st.graph.subgraph(members)
+        adversarial = any(d["adversarial"] for _, _, d in sub.edges(data=True))
+        coupled = any(d["couplings"] for _, _, d in sub.edges(data=True))
+        if kind == "auto":
+            mode = "adversarial" if adversarial else "coupled" if coupled else "single"
+        elif kind == TIMEWARP:
+            mode = "joint" if len(members) > 1 else "single_plain"
+        elif kind == TIME_LAYERED:
+            mode = "joint_layered"
+        elif kind == COUPLED:
+            mode = "coupled"
+        else:
+            mode = "adversarial"
+        if mode == "single_plain":
+            mode = "joint"
+        blocks, group = _program(st, members, mode)
+        # seams of this branch, for the style blends
+        seam_map = {b.seam: b.window for b in blocks if b.seam is not None}
+        styles = {m: _style_timeline(st, m, seam_map) for m in members}
+        name = group.name
+        for b in blocks:
+            b.steps = _steps_of(st, b, name, styles)
+            all_steps += b.steps
+        all_edges += _edges(blocks)
+        groups.append(group)
+
+    g = nx.DiGraph()
+    for s in all_steps:
+        g.add_node(s.id)
+    g.add_edges_from(all_edges)
+    reduced = nx.transitive_reduction(g)
+    return Schedule.from_steps(all_steps, sorted(reduced.edges()), scenario=scn.name, groups=tuple(groups),
+                               notes=tuple(notes))
