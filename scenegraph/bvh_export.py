@@ -78,12 +78,18 @@ def skeleton_of(ch: Character) -> tuple[BvhSkeleton, list[int]]:
     for j, bi in enumerate(order):
         if j not in has_child:
             b = ch.bodies[bi]
-            c, s = np.array(b.center), np.array(b.semi_axes)
-            k = int(np.argmax(s))
-            tip = c.copy()
-            tip[k] += math.copysign(s[k], c[k] if c[k] != 0 else 1.0)
-            ends[j] = tip
+            ends[j] = end_site_of(b.center, b.semi_axes)
     return BvhSkeleton(tuple(names), tuple(parents), offsets, ends), order
+
+
+def end_site_of(center, semi_axes) -> np.ndarray:
+    """The far tip of a leaf body's ellipsoid (joint frame): along the axis on which the
+    ellipsoid's centre lies farthest from the joint, away from the joint."""
+    c, s = np.asarray(center, dtype=float), np.asarray(semi_axes, dtype=float)
+    k = int(np.argmax(np.abs(c)))
+    tip = c.copy()
+    tip[k] += math.copysign(s[k], c[k]) if abs(c[k]) > 1e-9 else s[k]
+    return tip
 
 
 def euler_zyx(R: np.ndarray) -> np.ndarray:
@@ -241,4 +247,4 @@ def bvh_from_joint_transforms(path, names, parents, local: np.ndarray, fps: floa
     return Path(path)
 
 
-__all__ += ["resample_q", "atomic_write_text", "bvh_from_joint_transforms"]
+__all__ += ["resample_q", "atomic_write_text", "bvh_from_joint_transforms", "end_site_of"]
