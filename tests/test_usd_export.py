@@ -131,6 +131,24 @@ def test_joint_world_transforms_match_fk_at_every_frame(stage_path, tracks):
     assert dr <= 1e-4, dr
 
 
+def test_library_readback_helper_agrees(stage_path, tracks):
+    dp, dr, n = usd_export.readback_errors(stage_path, tracks, FPS)
+    assert n == 44 and dp <= 1e-6 and dr <= 1e-4
+    assert (dp, dr, n) == pytest.approx(compare_with_fk(stage_path, tracks), abs=1e-9)
+
+
+def test_rotation_samples_are_hemisphere_continuous(stage_path):
+    """Consecutive quaternions of a joint have a non-negative dot product, so UsdSkel's
+    interpolation between time codes takes the short way round."""
+    stage = Usd.Stage.Open(str(stage_path))
+    for prim in stage.Traverse():
+        if prim.IsA(UsdSkel.Animation):
+            attr = UsdSkel.Animation(prim).GetRotationsAttr()
+            Q = np.array([[[q.GetReal(), *q.GetImaginary()] for q in attr.Get(t)] for t in attr.GetTimeSamples()])
+            assert np.all(np.sum(Q[1:] * Q[:-1], axis=-1) >= 0)
+            assert np.allclose(np.linalg.norm(Q, axis=-1), 1, atol=1e-6)
+
+
 def test_validation_reports_no_finding(stage_path):
     assert validate_stage(stage_path) == []
 
