@@ -608,7 +608,7 @@ def build_stage(characters: Sequence[CharacterTrack], fps: float, *, markers: Se
     """Compose the stage in memory (a ``Usd.Stage`` on an anonymous layer).
 
     ``mesh_segments`` = (segments around, rings pole to pole) of each ellipsoid mesh."""
-    from pxr import Sdf, Usd, UsdGeom
+    from pxr import Usd, UsdGeom
     fps = float(fps)
     if not (math.isfinite(fps) and fps > 0):
         raise InputError(f"fps must be positive, got {fps}")

@@ -5,7 +5,6 @@ on any stage ``compose run`` wrote, in any of .usda/.usdc/.usdz.
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
