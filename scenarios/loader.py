@@ -116,7 +116,8 @@ def load_scenario(path_or_name: str | os.PathLike) -> Scenario:
     path = find_scenario(path_or_name)
     data, positions = load_yaml(path)
     if not isinstance(data, dict):
-        raise InputError("a scenario must be a mapping of fields", Location(str(path), 1, 1))
+        line, col = positions.get((), (1, 1))
+        raise InputError("a scenario must be a mapping of fields", Location(str(path), line, col))
     return validate_scenario(data, positions, str(path), Path(path).resolve().parent)
 
 

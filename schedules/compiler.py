@@ -212,19 +212,18 @@ def _style_timeline(st: _Structure, ch: str, seams: dict[float, tuple[float, flo
 
 
 def _free_footprints(st: _Structure, ch: str, window: tuple[float, float]) -> bool:
-    """Footprints are free unless explicit footprints cover the window."""
-    for _, g in st.goals_of[ch]:
-        if isinstance(g, FootprintsGoal) and any(_overlap(fp.time, window) or
-                                                 (fp.time[0] <= window[0] and window[1] <= fp.time[1])
-                                                 for fp in g.steps):
-            return False
-    return True
+    """Footprints are free unless the character's explicit footprints span the whole window."""
+    spans = [(min(fp.time[0] for fp in g.steps), max(fp.time[1] for fp in g.steps))
+             for _, g in st.goals_of[ch] if isinstance(g, FootprintsGoal)]
+    return not any(a <= window[0] + EPS and window[1] - EPS <= b for a, b in spans)
 
 
 def _goal_active(goal, window: tuple[float, float]) -> bool:
     if isinstance(goal, FootprintsGoal):
         return any(_interval_meets(fp.time, window) for fp in goal.steps)
-    if isinstance(goal, (WalkToGoal, ReachGoal, TackleGoal, AvoidGoal)):
+    if isinstance(goal, WalkToGoal):  # the walk (and its waypoints) happens over [0, time]
+        return window[0] <= goal.time + EPS
+    if isinstance(goal, (ReachGoal, TackleGoal, AvoidGoal)):
         return _touches(goal.time, window)
     return False
 
@@ -332,8 +331,8 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
     for m in members:
         for c in st.style_changes[m]:
             reasons.append(f"style of {m} changes to {c.style!r} at {_fmt(c.time)} s")
-    edges = [(a, b, d) for a, b, d in st.graph.subgraph(members).edges(data=True)]
-    for a, b, d in sorted(edges):
+    edges = [(min(a, b), max(a, b), d) for a, b, d in st.graph.subgraph(members).edges(data=True)]
+    for a, b, d in sorted(edges, key=lambda e: (e[0], e[1])):
         for cn in d["couplings"]:
             reasons.append(f"coupling {cn!r} links {a} and {b}")
         for gn in d["adversarial"]:
