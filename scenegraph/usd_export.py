@@ -682,6 +682,9 @@ def export_usd(path, characters: Sequence[CharacterTrack], fps: float, *, marker
         if ext == ".usdz":
             inner = os.path.join(tmpdir, stem + ".usdc")
             _export_layer(stage.GetRootLayer(), inner)
+            # The package records the file's mtime: pin it so the same input gives the same bytes.
+            stamp = int(os.environ.get("SOURCE_DATE_EPOCH", "946684800"))  # default 2000-01-01
+            os.utime(inner, (stamp, stamp))
             tmp = os.path.join(tmpdir, path.name)
             if not UsdUtils.CreateNewUsdzPackage(inner, tmp):
                 raise ComposeError(f"USD could not package {path}")

@@ -287,6 +287,17 @@ def test_binary_and_package_formats(tmp_path, tracks, ext):
     assert stage.GetRootLayer().customLayerData["compose"]["scenario"] == "synthetic.yaml"
 
 
+@pytest.mark.parametrize("ext", [".usda", ".usdc", ".usdz"])
+def test_output_is_deterministic(tmp_path, tracks, ext):
+    a = export_usd(tmp_path / f"s{ext}", tracks, FPS, markers=MARKERS, metadata=METADATA).read_bytes()
+    if ext == ".usdz":  # the package records file times: they must not come from the clock
+        import zipfile
+        with zipfile.ZipFile(tmp_path / f"s{ext}") as z:
+            assert [(i.filename, i.date_time[0]) for i in z.infolist()] == [("s.usdc", 2000)]
+    b = export_usd(tmp_path / f"s{ext}", tracks, FPS, markers=MARKERS, metadata=METADATA).read_bytes()
+    assert a == b
+
+
 # --- atomic write ------------------------------------------------------------------------------
 
 def _half_write_then(exc):
