@@ -245,10 +245,15 @@ def retarget(data, ch: Character, smoothness: float = 1e-3, rest_weight: float =
         if i >= N_ROOT and (base in extra or d.name in extra):
             rw[i] = extra.get(d.name, extra.get(base))
     solver = _build_solver(ch, specs, T, smoothness, tuple(rw), max_iter, verbose)
-    lo = np.tile(ch.lower, T)
-    hi = np.tile(ch.upper, T)
-    # the root yaw range must contain the unwrapped heading of the guess
-    x0 = np.clip(np.asarray(q0, dtype=float).reshape(T, N_DOF), ch.lower + 1e-9, ch.upper - 1e-9).ravel()
+    q0 = np.array(q0, dtype=float).reshape(T, N_DOF)
+    lo = np.tile(ch.lower, (T, 1))
+    hi = np.tile(ch.upper, (T, 1))
+    # Yaw is periodic: keep each frame within ±90° of the guess's unwrapped heading, so
+    # the fit cannot jump by a full turn between frames.
+    lo[:, 3] = np.maximum(lo[:, 3], q0[:, 3] - math.pi / 2)
+    hi[:, 3] = np.minimum(hi[:, 3], q0[:, 3] + math.pi / 2)
+    x0 = np.clip(q0, lo + 1e-9, hi - 1e-9).ravel()
+    lo, hi = lo.ravel(), hi.ravel()
     P = targets.reshape(T * K, 3).T  # (3, T*K): frame t's points in columns t*K … t*K+K−1
     sol = solver(x0=x0, lbx=lo, ubx=hi, p=np.concatenate([P.ravel(order="F"), w]))
     stats = solver.stats()
