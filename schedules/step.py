@@ -70,13 +70,16 @@ class StyleTimeline:
             return keys[0][1], keys[0][1], 0.0
         for (t0, s0), (t1, s1) in zip(keys, keys[1:]):
             if t <= t1:
-                w = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
+                if s0 == s1:
+                    return s0, s1, 0.0
+                w = 1.0 if t1 == t0 else (t - t0) / (t1 - t0)
                 return s0, s1, w
         return keys[-1][1], keys[-1][1], 0.0
 
     @property
     def changes(self) -> bool:
-        return len({s for _, s in self.keys}) > 1 or len(self.keys) > 1
+        """True if the timeline has a style change (even to the same style: a blend window)."""
+        return len(self.keys) > 1
 
 
 @dataclass(frozen=True)

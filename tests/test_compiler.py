@@ -1,0 +1,330 @@
+"""The schedule compiler: kinds chosen per bundled scenario and partial-order properties of the graph."""
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+from scenarios import bundled_scenarios, load_scenario, parse_scenario
+from schedules import (COUPLED, DECREASING_HORIZON, JOINT, TIME_LAYERED, TIMEWARP, Schedule, Step,
+                       compile_schedule)
+from schedules.cli import main
+from schedules.compiler import layer_windows
+
+FULL = Path(__file__).resolve().parent / "scenarios" / "full.yaml"
+
+
+def _compile(name_or_text: str, extra: str = "") -> Schedule:
+    if extra or "\n" in name_or_text:
+        text = name_or_text if "\n" in name_or_text else bundled_scenarios()[name_or_text].read_text()
+        return compile_schedule(parse_scenario(text + extra, "t.yaml"))
+    return compile_schedule(load_scenario(name_or_text))
+
+
+def _blocks(s: Schedule) -> dict[str, list[Step]]:
+    """Steps grouped by their subproblem (id without the /timing|/full suffix)."""
+    out: dict[str, list[Step]] = {}
+    for st in s.order():
+        out.setdefault(st.id.rsplit("/", 1)[0], []).append(st)
+    return out
+
+
+# --- kinds chosen per bundled scenario ------------------------------------------------------------
+
+KINDS = [
+    # scenario, kinds of the schedule, number of independent branches
+    ("walk", {TIMEWARP}, 1),
+    ("walk_to", {TIMEWARP}, 1),
+    ("two_walkers", {TIMEWARP}, 2),
+    ("walk_to_run", {TIME_LAYERED, TIMEWARP}, 1),
+    ("handhold", {COUPLED, TIMEWARP}, 1),
+    ("tackle", {DECREASING_HORIZON, TIMEWARP}, 1),
+]
+
+
+def test_every_bundled_scenario_has_a_row():
+    assert {row[0] for row in KINDS} == set(bundled_scenarios())
+
+
+@pytest.mark.parametrize("name,kinds,branches", KINDS)
+def test_kinds_chosen(name, kinds, branches):
+    s = _compile(name)
+    assert s.kinds == kinds
+    assert len(s.groups) == branches
+    assert nx.number_weakly_connected_components(s.graph) == branches
+
+
+@pytest.mark.parametrize("name", list(bundled_scenarios()) + [str(FULL)])
+def test_general_properties(name):
+    s = _compile(name)
+    g = s.graph
+    assert nx.is_directed_acyclic_graph(g)
+    order = s.order()
+    pos = {st.id: i for i, st in enumerate(order)}
+    assert len(pos) == len(s) == g.number_of_nodes()
+    assert all(pos[a] < pos[b] for a, b in g.edges()), "order() must be a topological order"
+    # timewarp schedule for every subproblem: timing (relaxed dynamics) then full (hard dynamics)
+    for block, steps in _blocks(s).items():
+        assert [st.kind for st in steps] == ["timing", "full"], block
+        timing, full = steps
+        assert g.has_edge(timing.id, full.id)
+        assert timing.term("dynamics") == "relaxed" and full.term("dynamics") == "hard"
+        assert "timewarp" in timing.free and "lambda" in full.free
+        assert TIMEWARP in timing.schedules
+    for st in order:
+        assert 0.0 <= st.window[0] < st.window[1] <= load_scenario(name).duration + 1e-9
+        assert st.term("energy") == 1.0
+        assert {t.character for t in st.styles} == set(st.characters)
+        assert st.group in {gr.name for gr in s.groups}
+    # no edges between branches
+    for a, b in g.edges():
+        assert s.step(a).group == s.step(b).group
+    # the same scenario always gives the same graph and order
+    again = _compile(name)
+    assert again.to_data() == s.to_data()
+    assert [st.id for st in again.order()] == [st.id for st in order]
+
+
+# --- partial-order properties ---------------------------------------------------------------------
+
+def test_walk_is_one_timewarp_pair_on_explicit_footprints():
+    s = _compile("walk")
+    assert [st.id for st in s.order()] == ["walker/c1/whole/timing", "walker/c1/whole/full"]
+    full = s.order()[-1]
+    assert "footprints" not in full.free  # explicit footprints are fixed
+    assert full.goals == ("footprints_0",) and full.term("start") == "hard"
+
+
+def test_walk_to_frees_the_footprints():
+    s = _compile("walk_to")
+    assert all("footprints" in st.free for st in s.order())
+    assert all(st.goals == ("walk_to_0",) for st in s.order())
+
+
+def test_independent_characters_have_no_path_between_their_steps():
+    s = _compile("two_walkers")
+    alice = [st.id for st in s.steps_of("alice")]
+    bob = [st.id for st in s.steps_of("bob")]
+    assert alice and bob
+    for a, b in itertools.product(alice, bob):
+        assert not s.has_path(a, b) and not s.has_path(b, a)
+    assert all(not st.observes for st in s.order())
+    # they may run in parallel: the first generation holds both characters
+    assert {st.characters for st in s.generations()[0]} == {("alice",), ("bob",)}
+
+
+def test_time_layered_seam_runs_after_both_windows():
+    s = _compile("walk_to_run")
+    steps = s.order()
+    for cycle in (1, 2):
+        w0 = s.step(f"runner/c{cycle}/w0/full")
+        w1 = s.step(f"runner/c{cycle}/w1/full")
+        seam = s.step(f"runner/c{cycle}/seam0/timing")
+        assert w0.window[1] == w1.window[0] == 1.0  # windows abut at the style change
+        assert seam.window[0] < 1.0 < seam.window[1] and seam.seam == 1.0 and seam.role == "seam"
+        assert s.has_path(w0.id, seam.id) and s.has_path(w1.id, seam.id)
+        # A and B of one cycle are independent
+        assert not s.has_path(w0.id, f"runner/c{cycle}/w1/timing")
+        assert not s.has_path(w1.id, f"runner/c{cycle}/w0/timing")
+        # endpoint conditions from the neighbours
+        assert w0.term("boundary:end") == "hard" and w0.term("start") == "hard"
+        assert w1.term("boundary:start") == "hard" and w1.term("boundary:end") is None
+        assert seam.term("boundary:start") == seam.term("boundary:end") == "hard"
+    # the next cycle's windows run after the previous seam
+    assert s.has_path("runner/c1/seam0/full", "runner/c2/w0/timing")
+    assert s.has_path("runner/c1/seam0/full", "runner/c2/w1/timing")
+    # θ interpolated across the seam window
+    seam = s.step("runner/c1/seam0/full")
+    (timeline,) = seam.styles
+    assert [t for t, _ in timeline.keys] == [0.0, seam.window[0], seam.window[1]]
+    assert steps[-1].role == "seam"
+
+
+def test_style_blend_is_linear_across_the_seam():
+    s = _compile("walk_to_run")
+    (tl,) = s.step("runner/c1/seam0/full").styles
+    assert [t for t, _ in tl.keys] == [0.0, 0.5, 1.5]  # the blend spans the seam window
+    s = _compile(str(FULL))
+    (tl,) = next(st for st in s.order() if st.characters == ("mother",)).styles
+    assert tl.at(1.0) == ("custom.style.yaml", "custom.style.yaml", 0.0)
+    assert tl.at(1.4) == ("custom.style.yaml", "default", pytest.approx(0.25))
+    assert tl.at(2.5) == ("default", "default", 0.0)
+
+
+def test_coupled_characters_alternate_with_rising_stiffness():
+    s = _compile("handhold")
+    fulls = [st for st in s.order() if st.kind == "full"]
+    assert [st.characters[0] for st in fulls] == ["anna", "ben"] * 4
+    stiff = [st.stiffness for st in fulls]
+    assert all(k is not None for k in stiff)
+    assert all(b >= a for a, b in zip(stiff, stiff[1:])), stiff
+    per_cycle = {st.cycle: st.stiffness for st in fulls}
+    assert all(per_cycle[c + 1] > per_cycle[c] for c in range(1, 4))
+    for st in s.order():
+        assert st.term("coupling:hold") == st.stiffness
+        assert st.observes == (("ben",) if st.characters == ("anna",) else ("anna",))
+    # strictly alternating: a single chain
+    assert all(len(gen) == 1 for gen in s.generations())
+
+
+def test_solves_per_cycle_decides_who_adapts_more():
+    s = _compile("handhold", "schedule:\n  solves_per_cycle: {anna: 3}\n  cycles: 2\n")
+    fulls = [st for st in s.order() if st.kind == "full"]
+    assert [st.characters[0] for st in fulls] == ["anna", "ben", "anna", "anna"] * 2
+    assert {st.repeat for st in fulls if st.characters == ("anna",)} == {1, 2, 3}
+
+
+def test_stiffness_schedule_parameters():
+    s = _compile("handhold", "schedule:\n  stiffness_start: 10\n  stiffness_increase: 0\n"
+                             "  stiffness_factor: 10\n  cycles: 3\n")
+    assert sorted({st.stiffness for st in s.order()}) == [10.0, 100.0, 1000.0]
+
+
+def test_decreasing_horizon_shrinks_and_planner_last_is_last():
+    s = _compile("tackle")
+    fulls = [st for st in s.order() if st.kind == "full"]
+    assert [st.characters[0] for st in fulls] == ["dodger", "tackler"] * 3
+    assert s.order()[-1].characters == ("tackler",)  # plans_last: tackler
+    by_cycle: dict[int, set] = {}
+    for st in fulls:
+        by_cycle.setdefault(st.cycle, set()).add(st.window)
+    windows = [by_cycle[c].pop() for c in sorted(by_cycle)]
+    assert all(len(by_cycle[c]) == 0 for c in by_cycle)  # one window per cycle
+    lengths = [b - a for a, b in windows]
+    assert all(b < a for a, b in zip(lengths, lengths[1:])), lengths
+    t_hit = 1.0
+    before = [t_hit - a for a, _ in windows]  # time left to react before the impact halves
+    assert before == pytest.approx([1.0, 0.5, 0.25])
+    assert all(b == 1.2 for _, b in windows)
+    for st in fulls:
+        assert st.role == "horizon"
+        if st.characters == ("tackler",):
+            assert "tackle_1" in st.goals
+        else:
+            assert "avoid_2" in st.goals and st.term("impact:tackle_1") == "hard"
+        assert (st.term("start") == "hard") == (st.window[0] == 0.0)
+        assert (st.term("boundary:start") == "hard") == (st.window[0] > 0.0)
+
+
+def test_plans_last_decides_the_order():
+    text = bundled_scenarios()["tackle"].read_text().replace("plans_last: tackler", "plans_last: dodger")
+    s = compile_schedule(parse_scenario(text, "t.yaml"))
+    assert s.order()[-1].characters == ("dodger",)
+    fulls = [st for st in s.order() if st.kind == "full"]
+    assert [st.characters[0] for st in fulls] == ["tackler", "dodger"] * 3
+
+
+def test_long_duration_is_time_layered_within_max_window():
+    text = bundled_scenarios()["walk_to"].read_text().replace("duration: 1.4", "duration: 6.0") \
+        .replace("time: 1.4", "time: 6.0")
+    s = compile_schedule(parse_scenario(text, "t.yaml"))
+    assert TIME_LAYERED in s.kinds
+    assert all(st.duration <= 2.5 + 1e-9 for st in s.order())
+    seams = [st for st in s.order() if st.role == "seam" and st.kind == "full" and st.cycle == 1]
+    assert len(seams) == 2
+    # seams of one cycle do not depend on each other
+    assert not s.has_path(seams[0].id, seams[1].id) and not s.has_path(seams[1].id, seams[0].id)
+
+
+def test_full_scenario_branches():
+    s = _compile(str(FULL))
+    groups = {g.name: g for g in s.groups}
+    assert set(groups) == {"child+mother", "dodger+tackler", "porter_a+porter_b"}
+    assert set(groups["child+mother"].kinds) == {COUPLED, TIME_LAYERED, TIMEWARP}
+    assert set(groups["dodger+tackler"].kinds) == {DECREASING_HORIZON, TIMEWARP}
+    assert set(groups["porter_a+porter_b"].kinds) == {COUPLED, TIME_LAYERED, TIMEWARP}
+    # the dodger plans last in its branch
+    horizon = [st for st in s.order() if st.group == "dodger+tackler"]
+    assert horizon[-1].characters == ("dodger",)
+    # solves_per_cycle {child: 2}: the child is solved twice per window and cycle
+    child = [st for st in s.order() if st.characters == ("child",) and st.kind == "full" and st.cycle == 1]
+    mother = [st for st in s.order() if st.characters == ("mother",) and st.kind == "full" and st.cycle == 1]
+    assert len(child) == 2 * len(mother)
+    # the mother's style blends over the change's own `blend` (0.4 s around 1.5 s)
+    mom = next(st for st in s.order() if st.characters == ("mother",))
+    assert mom.styles[0].keys == ((0.0, "custom.style.yaml"), (1.3, "custom.style.yaml"), (1.7, "default"))
+    # free timing: the duration is free in timing steps that reach the end
+    assert any("duration" in st.free for st in s.order() if st.kind == "timing")
+
+
+@pytest.mark.parametrize("kind,expect", [
+    ("timewarp", {JOINT, TIMEWARP}),
+    ("time_layered", {JOINT, TIME_LAYERED, TIMEWARP}),
+    ("coupled", {COUPLED, TIMEWARP}),
+    ("decreasing_horizon", {DECREASING_HORIZON, TIMEWARP}),
+])
+def test_explicit_schedule_overrides_the_compiler(kind, expect):
+    s = _compile("handhold", f"schedule:\n  kind: {kind}\n  cycles: 2\n")
+    assert s.kinds == expect
+    if kind in ("timewarp", "time_layered"):
+        assert all(st.characters == ("anna", "ben") for st in s.order())
+        assert all(st.term("coupling:hold") == "hard" and "coupling_forces" in st.free
+                   for st in s.order() if st.kind == "full")
+
+
+def test_explicit_schedule_can_drop_the_timing_step():
+    s = _compile("walk", "schedule:\n  timewarp: false\n")
+    assert [st.kind for st in s.order()] == ["full"]
+    assert "timewarp" in s.order()[0].free and TIMEWARP not in s.kinds
+
+
+def test_explicit_coupled_puts_everyone_in_one_branch():
+    s = _compile("two_walkers", "schedule:\n  kind: coupled\n")
+    assert len(s.groups) == 1 and s.kinds == {COUPLED, TIMEWARP}
+
+
+# --- windows -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("T,cuts,maxw,seam,windows,seams", [
+    (2.0, [1.0], 2.5, None, [(0, 1), (1, 2)], [(0.5, 1.5, 1.0)]),
+    (2.0, [], 2.5, None, [(0, 2)], []),
+    (5.0, [], 2.0, None, [(0, 5 / 3), (5 / 3, 10 / 3), (10 / 3, 5)],
+     [(5 / 6, 2.5, 5 / 3), (2.5, 25 / 6, 10 / 3)]),
+    (3.0, [0.5], 2.5, 0.4, [(0, 0.5), (0.5, 3.0)], [(0.3, 0.7, 0.5)]),
+    (3.0, [0.5], 2.5, 5.0, [(0, 0.5), (0.5, 3.0)], [(0.0, 1.0, 0.5)]),
+])
+def test_layer_windows(T, cuts, maxw, seam, windows, seams):
+    w, s = layer_windows(T, cuts, maxw, seam)
+    assert w == pytest.approx(windows) and s == pytest.approx(seams)
+    assert all(b - a <= maxw + 1e-9 for a, b in w)
+
+
+# --- rendering and the CLI ------------------------------------------------------------------------------
+
+def test_text_and_dot_rendering(tmp_path):
+    s = _compile("handhold")
+    text = s.to_text()
+    assert all(st.id in text for st in s.order())
+    assert "coupled" in text.splitlines()[0]
+    dot = s.to_dot()
+    assert dot.startswith("digraph") and dot.rstrip().endswith("}")
+    for a, b in s.graph.edges():
+        assert f'"{a}" -> "{b}";' in dot
+    path = tmp_path / "s.dot"
+    s.write_dot(path)
+    assert path.read_text() == dot
+
+
+def test_schedule_command_by_bundled_name(tmp_path, capsys):
+    out = tmp_path / "tackle.dot"
+    assert main(["schedule", "tackle", "--dot", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "decreasing_horizon" in text and "tackler/c3/horizon/full" in text
+    assert out.read_text().startswith("digraph")
+
+
+def test_schedule_png_needs_graphviz(tmp_path, capsys, monkeypatch):
+    import shutil as _shutil
+    monkeypatch.setattr(_shutil, "which", lambda name: None)
+    assert main(["schedule", "walk", "--png", str(tmp_path / "x.png")]) == 2
+    assert "graphviz" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_schedule_json_round_trips(capsys):
+    import json
+    assert main(["schedule", "walk_to_run", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [s["id"] for s in data["steps"]] == [s.id for s in _compile("walk_to_run").order()]
