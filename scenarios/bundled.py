@@ -50,18 +50,18 @@ def bundled_styles() -> dict[str, Path | None]:
 
 
 def find_scenario(name_or_path: str | os.PathLike) -> Path:
-    """A scenario file: an existing path, else a bundled scenario name (``tackle``)."""
+    """A scenario file: an existing path, else a bundled scenario name (``tackle``, no suffix)."""
     s = str(name_or_path)
     p = Path(s)
     if p.exists():
         return p
-    bundled = bundled_scenarios()
-    key = s[:-5] if s.endswith(".yaml") and "/" not in s else s
-    if key in bundled and "/" not in s and os.sep not in s:
-        return bundled[key]
-    if "/" in s or os.sep in s or s.endswith((".yaml", ".yml")):
+    looks_like_path = "/" in s or os.sep in s or s.endswith((".yaml", ".yml"))
+    if looks_like_path:
         raise InputError("file not found", Location(s))
-    raise InputError(suggest(s, list(bundled), "scenario") + " (not a file either)", Location(s))
+    bundled = bundled_scenarios()
+    if s in bundled:
+        return bundled[s]
+    raise InputError(suggest(s, list(bundled), "scenario") + " (and no such file)", Location(s))
 
 
 def allowed_roots(base_dir: Path | None) -> list[Path]:

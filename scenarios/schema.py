@@ -22,7 +22,6 @@ offending field's line and column.  Checks that need to know where the scenario 
 from __future__ import annotations
 
 import difflib
-import re
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
@@ -451,8 +450,7 @@ class Scenario(_Model):
     """A scenario: characters, their goals and couplings, in an environment, over a duration."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False,
-                              json_schema_extra={"$id": "https://compose.invalid/scenario.schema.json",
-                                                 "title": "compose scenario"})
+                              title="compose scenario")
 
     version: Literal[1] = Field(1, description="scenario format version")
     name: Name = Field(description="scenario name")

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 
-from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachGoal, Scenario, ScheduleSpec,
+from scenarios.schema import (AvoidGoal, FootprintsGoal, ReachGoal, Scenario, ScheduleSpec,
                               StyleChangeGoal, TackleGoal, WalkToGoal)
 
 from .step import (COUPLED, DECREASING_HORIZON, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
