@@ -93,7 +93,8 @@ class Step:
     free        free variable blocks: ``q`` (DOF spline coefficients), ``timewarp``,
                 ``footprints`` (free constraint locations), ``lambda`` (contact force
                 coefficients), ``coupling_forces`` (forces of hard couplings), ``duration``
-                (the total length, with free timing)
+                (with ``timing: free``: the end of this character's timewarp, within
+                ``duration_bounds``; only in steps whose window reaches the end)
     terms       (name, weight) pairs; names: ``energy`` (weight), ``dynamics`` (hard|relaxed),
                 ``environment`` (ground, friction cone, no penetration, feet not crossing),
                 ``start`` (start position and heading), ``boundary:start`` / ``boundary:end``
