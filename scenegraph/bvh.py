@@ -76,7 +76,14 @@ class BvhFile:
 
     @property
     def fps(self) -> float:
-        return 1.0 / self.frame_time
+        """Frame rate (Hz); a rounded frame time (0.0083333) snaps to its integer rate (120)."""
+        r = 1.0 / self.frame_time
+        return float(round(r)) if abs(r - round(r)) < 1e-4 * r else r
+
+    @property
+    def dt(self) -> float:
+        """Frame period (s) consistent with :attr:`fps`."""
+        return 1.0 / self.fps
 
     @property
     def joint_names(self) -> list[str]:
@@ -209,8 +216,10 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
             if n < 0 or n > 6:
                 raise tk.error(f"channel count of {name!r} must be 0..6, found {n}", ct)
             chans = []
-            for _ in range(n):
+            for k in range(n):
                 c = tk.next("a channel name")
+                if c[0] in ("JOINT", "End", "}", "{", "OFFSET", "CHANNELS", "MOTION"):
+                    raise tk.error(f"joint {name!r}: CHANNELS declares {n} channels but lists {k}", ct)
                 if c[0] not in _ROT and c[0] not in _POS:
                     raise tk.error(f"joint {name!r}: unknown channel {c[0]!r} (CHANNELS says {n}; "
                                    f"known: Xposition … Zrotation)", c)
@@ -232,6 +241,9 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
                 parse_joint(idx, t, False)
             elif t[0] == "End":
                 parse_joint(idx, t, True)
+            elif t[0] in _ROT or t[0] in _POS:
+                raise tk.error(f"joint {name!r}: more channel names than CHANNELS declares "
+                               f"({len(channels)})", t)
             else:
                 raise tk.error(f"expected '}}', 'JOINT' or 'End Site', found {t[0]!r}", t)
 

@@ -328,7 +328,7 @@ def read_clip(path: str | os.PathLike, rig: str | os.PathLike | Rig | None = Non
     floor_idx = [var.joint_index[var.points.index(p)] for p in rig_.floor]
     floor = estimate_floor(pos_src[first_motion:, floor_idx, 2])
 
-    dt = bvh.frame_time
+    dt = bvh.dt
     t_src = (np.arange(a, b) - a) * dt
     n_new = int(np.floor(t_src[-1] * fps + 1e-6)) + 1
     t_new = np.arange(n_new) / fps
