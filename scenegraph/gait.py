@@ -1,0 +1,133 @@
+"""Initial motions for synthesis (paper §7): root from the footprints, joints from an example.
+
+1. The root's horizontal path is a smooth curve through the midpoints of consecutive
+   footprints, its heading the curve's tangent, its height the standing height.
+2. Joint angles come from the most similar pose of an example motion, matched by the gait
+   phase of each leg (stance or swing and how far into it).  Without a mocap example a
+   built-in example gait is used: a few smooth curves of hip, knee, ankle, toe and arm
+   angles over the phase, shaped after textbook gait kinematics.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .body import N_DOF, Character, standing_pose
+from .footsteps import Footstep
+from .motion import Motion
+
+__all__ = ["initial_motion", "leg_phase", "example_gait_pose"]
+
+D = np.deg2rad
+
+
+def leg_phase(footsteps: tuple[Footstep, ...], foot: str, t: float) -> tuple[str, float]:
+    """("stance"|"swing", fraction in [0, 1]) of one leg at world time t."""
+    steps = sorted((f for f in footsteps if f.foot == foot), key=lambda f: f.t0)
+    for f in steps:
+        if f.t0 <= t <= f.t1:
+            return "stance", (t - f.t0) / (f.t1 - f.t0)
+    prev = [f for f in steps if f.t1 < t]
+    nxt = [f for f in steps if f.t0 > t]
+    other = [f for f in footsteps if f.foot != foot]
+    typical_stance = np.mean([f.t1 - f.t0 for f in footsteps]) if footsteps else 0.6
+    period = 2 * np.mean(np.diff(sorted(f.t0 for f in footsteps))) if len(footsteps) > 1 else 1.1
+    swing = max(period - typical_stance, 0.2)
+    t_off = prev[-1].t1 if prev else (nxt[0].t0 - swing if nxt else t)
+    t_on = nxt[0].t0 if nxt else t_off + swing
+    del other
+    return "swing", float(np.clip((t - t_off) / max(t_on - t_off, 1e-3), 0, 1))
+
+
+def example_gait_pose(ch: Character, phase_l, phase_r, run: bool = False) -> np.ndarray:
+    """Joint angles (35-vector, root zero) of the built-in example gait for two leg phases."""
+    q = np.zeros(N_DOF)
+    idx = ch.dof_index
+    for side, (kind, u) in (("l", phase_l), ("r", phase_r)):
+        if kind == "stance":
+            hip = D(22) - D(32) * u if not run else D(25) - D(40) * u
+            knee = D(8) + D(12) * np.sin(np.pi * u) if not run else D(20) + D(25) * np.sin(np.pi * u)
+            ankle = D(-5) + D(15) * np.sin(np.pi * min(u * 1.3, 1.0)) - D(15) * max(0.0, u - 0.8) / 0.2
+            toe = D(25) * max(0.0, u - 0.7) / 0.3
+            hip_phase = -1.0 + 2.0 * u  # -1 at landing → +1 at toe-off: arm swings forward later
+        else:
+            hip = D(-10) + D(32) * (1 - np.cos(np.pi * u)) / 2 if not run else D(-15) + D(45) * (1 - np.cos(np.pi * u)) / 2
+            knee = D(60) * np.sin(np.pi * min(u * 1.25, 1.0)) + D(5) if not run else D(95) * np.sin(np.pi * u) + D(15)
+            ankle = D(5) * np.sin(np.pi * u)
+            toe = D(10) * (1 - u)
+            hip_phase = 1.0 - 2.0 * u
+        q[idx(f"hip_flex_{side}")] = hip
+        q[idx(f"knee_flex_{side}")] = knee
+        q[idx(f"ankle_flex_{side}")] = ankle
+        q[idx(f"toe_flex_{side}")] = toe
+        # arms swing opposite to the same-side leg
+        q[idx(f"shoulder_flex_{side}")] = D(12) * hip_phase
+        q[idx(f"shoulder_abd_{side}")] = D(6)
+        q[idx(f"elbow_flex_{side}")] = D(20) if not run else D(80)
+    return q
+
+
+def _root_path(footsteps: tuple[Footstep, ...], times: np.ndarray):
+    steps = sorted(footsteps, key=lambda f: f.t0)
+    mids = [((a.t0 + a.t1 + b.t0 + b.t1) / 4, (np.array(a.position) + np.array(b.position)) / 2)
+            for a, b in zip(steps, steps[1:])]
+    if not mids:
+        f = steps[0]
+        mids = [((f.t0 + f.t1) / 2, np.array(f.position))]
+    kt = np.array([m[0] for m in mids])
+    kp = np.array([m[1] for m in mids])
+    if len(kt) == 1:
+        xy = np.repeat(kp, len(times), axis=0)
+        heading = np.full(len(times), steps[0].heading)
+    else:
+        # piecewise-linear through the midpoints, extrapolated at the ends, then smoothed
+        xy = np.stack([np.interp(times, kt, kp[:, i], left=np.nan, right=np.nan) for i in (0, 1)], axis=1)
+        v0 = (kp[1] - kp[0]) / (kt[1] - kt[0])
+        v1 = (kp[-1] - kp[-2]) / (kt[-1] - kt[-2])
+        before, after = times < kt[0], times > kt[-1]
+        xy[before] = kp[0] + np.outer(times[before] - kt[0], v0)
+        xy[after] = kp[-1] + np.outer(times[after] - kt[-1], v1)
+        vel = np.gradient(xy, times, axis=0)
+        heading = np.unwrap(np.arctan2(vel[:, 1], vel[:, 0]))
+    return xy, heading
+
+
+def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1: float,
+                   ctrl_per_second: float = 14.0, run: bool = False,
+                   example=None) -> Motion:
+    """An initial motion over [t0, t1] (s) for the given footsteps.
+
+    ``example``: an optional (times, q (T, 35), footsteps) example motion whose poses are
+    matched by leg phase; without it the built-in example gait is used.
+    """
+    times = np.linspace(t0, t1, max(8, int((t1 - t0) * 60) + 1))
+    xy, heading = _root_path(footsteps, times)
+    stand = standing_pose(ch)
+    q = np.zeros((len(times), N_DOF))
+    ex_phases = None
+    if example is not None:
+        ex_t, ex_q, ex_steps = example
+        ex_phases = np.array([[_phase_code(leg_phase(ex_steps, f, t)) for f in ("l", "r")] for t in ex_t])
+    for i, t in enumerate(times):
+        ph_l, ph_r = leg_phase(footsteps, "l", t), leg_phase(footsteps, "r", t)
+        if ex_phases is None:
+            q[i] = example_gait_pose(ch, ph_l, ph_r, run)
+        else:
+            code = np.array([_phase_code(ph_l), _phase_code(ph_r)])
+            j = int(np.argmin(np.sum(_phase_dist(ex_phases, code), axis=1)))
+            q[i] = ex_q[j]
+        q[i, 0:2] = xy[i]
+        q[i, 3] = heading[i]
+        q[i, 2] = stand[2] * (0.97 if not run else 0.95)
+        q[i, 4] = np.deg2rad(3 if not run else 8)  # slight forward lean
+    return Motion.from_samples(times, q, max(6, int(round((t1 - t0) * ctrl_per_second)) + 3))
+
+
+def _phase_code(ph: tuple[str, float]) -> float:
+    """Map a leg phase onto one cycle coordinate in [0, 2): stance [0, 1), swing [1, 2)."""
+    kind, u = ph
+    return u if kind == "stance" else 1.0 + u
+
+
+def _phase_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = np.abs(a - b)
+    return np.minimum(d, 2.0 - d)

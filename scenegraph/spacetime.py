@@ -1,0 +1,448 @@
+"""One spacetime subproblem (a Step's unit of work): problem, transcription, solve, result.
+
+Transcription
+-------------
+Decision variables: the free DOF spline control points, the free timewarp control points,
+contact coefficients λ ≥ 0 (four per planted handle per collocation point; the contact
+force is m g V λ with V the friction-pyramid basis) and free footprint positions.
+Collocation points are uniform in canonical time s; the energy (paper Eq. 13)
+
+    E = Σ_k w_k T'(s_k) [ Σ_j α_j Q_mj(s_k)² + w_r Σ_i Q_0i(s_k)² ]
+
+is a sum of squares of residuals computed by one per-point kernel (inverse dynamics plus
+passive, contact and shoe terms) that is compiled to C with its first derivatives.
+IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals) plus the exact Hessian of
+the kinematic constraints: second derivatives of the dynamics are never formed.  Style θ
+and all fixed data are NLP parameters, so one built problem serves many solves (NIO).
+
+Constraints: footsteps (planted handles at their footprint on the ground), ground
+non-penetration of the foot handles, feet not crossing (thesis Eq. 6.3), joint limits
+(bounds on control points: a B-spline stays in the hull of its control points), monotone
+timewarp (Eq. 6.1), optional boundary states and avoid-spheres; soft springs toward
+handle targets and poses (continuations).
+"""
+from __future__ import annotations
+
+import functools
+import time as _time
+from dataclasses import dataclass, field, replace
+
+import casadi as ca
+import numpy as np
+
+from .body import G, N_DOF, N_JOINT, N_ROOT, Character
+from .dynamics import friction_basis, muscle_and_residual
+from .footsteps import Footstep, contact_points
+from .kinematics import frame_transforms, handle_position
+from .motion import Motion, basis
+from .style import Style
+
+__all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Avoid", "Result", "solve", "build",
+           "CONTACT_HANDLES", "residual_kernel", "W_ROOT"]
+
+W_ROOT = 100.0  # paper: weight of the root residual
+CONTACT_HANDLES = ("heel_l", "ball_l", "toe_l", "heel_r", "ball_r", "toe_r")
+FORCE_HANDLES = CONTACT_HANDLES + ("palm_l", "palm_r")
+N_THETA = 4 * N_JOINT + 2  # style numbers the kernel needs: ks1, ks2, kd, q_rest, k_shoe, h_rest
+
+
+@dataclass(frozen=True)
+class HandleTarget:
+    """Soft spring pulling ``handle`` toward ``point`` (world, m) at world time ``t``.
+
+    ``weight`` is in 1/m² of the normalised objective; ``hard`` makes it an equality.
+    """
+
+    handle: str
+    t: float
+    point: tuple[float, float, float]
+    weight: float = 10.0
+    hard: bool = False
+    name: str = "target"
+
+
+@dataclass(frozen=True)
+class PoseTarget:
+    """Soft spring toward a full pose ``q`` (35) at world time ``t`` (continuations, seams)."""
+
+    t: float
+    q: tuple[float, ...]
+    weight: float = 1.0
+    velocity: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class Avoid:
+    """Keep ``handle`` outside a sphere (center world m, radius m) at world time ``t``."""
+
+    handle: str
+    t: float
+    center: tuple[float, float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
+class Subproblem:
+    """What one Step solves for one character.  Times are world times of ``motion``.
+
+    ``window`` (t0, t1): control points whose support lies inside are free; the others are
+    held, which gives the boundary conditions of a window.  ``free`` names the free blocks:
+    "q" (spline control points), "warp", "footprints" (positions of footsteps with
+    ``free=True``); λ is always free where a handle is planted.  ``dynamics`` is "full"
+    (energy with w_r) or "relaxed" (root residual weight divided by 100: timing steps).
+    ``style_end`` blends θ linearly over the window toward another style (transitions).
+    """
+
+    character: Character
+    style: Style
+    motion: Motion
+    footsteps: tuple[Footstep, ...] = ()
+    window: tuple[float, float] | None = None
+    free: frozenset = frozenset({"q", "warp"})
+    dynamics: str = "full"
+    targets: tuple[HandleTarget, ...] = ()
+    poses: tuple[PoseTarget, ...] = ()
+    avoid: tuple[Avoid, ...] = ()
+    style_end: Style | None = None
+    collocation_hz: float = 30.0
+    fix_start_time: bool = True
+    fix_end_time: bool = True
+    min_foot_separation: float = 0.06
+    max_iter: int = 300
+    tol: float = 1e-6
+    label: str = "step"
+
+
+@dataclass
+class Result:
+    """Outcome of one solve."""
+
+    motion: Motion
+    footsteps: tuple[Footstep, ...]
+    status: str
+    success: bool
+    iterations: int
+    seconds: float
+    energy: float
+    objective: float
+    violations: dict[str, float]
+    contact_forces: dict = field(default_factory=dict)  # handle -> (times, forces (n,3))
+    label: str = "step"
+
+    def summary(self) -> str:
+        worst = max(self.violations.items(), key=lambda kv: kv[1], default=("none", 0.0))
+        return (f"{self.label}: {self.status} in {self.iterations} it, {self.seconds:.2f} s, "
+                f"E={self.energy:.4g}, worst violation {worst[0]}={worst[1]:.2e}")
+
+
+# --- the per-point kernel -------------------------------------------------------------------
+
+@functools.lru_cache(maxsize=8)
+def residual_kernel(ch: Character) -> ca.Function:
+    """(q, q̇, q̈ (35 each), forces at FORCE_HANDLES (3·8, world N), θ (118)) → [Q_m (29); Q_0 (6)]."""
+    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
+    fc = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
+    th = ca.SX.sym("theta", N_THETA)
+
+    class _S:  # the style numbers the dynamics need
+        ks1, ks2, kd, q_rest = (th[i * N_JOINT:(i + 1) * N_JOINT] for i in range(4))
+        k_shoe, h_rest = th[4 * N_JOINT], th[4 * N_JOINT + 1]
+
+    ext = []
+    for i, name in enumerate(FORCE_HANDLES):
+        h = ch.handle(name)
+        ext.append((ch.body(h.body).frame, h.point, fc[3 * i:3 * i + 3]))
+    qm, q0 = muscle_and_residual(ch, q, qd, qdd, _S, ext)
+    return ca.Function("compose_residual", [q, qd, qdd, fc, th], [ca.vertcat(qm, q0)],
+                       ["q", "qd", "qdd", "f", "theta"], ["Q"])
+
+
+@functools.lru_cache(maxsize=8)
+def compiled_kernel(ch: Character) -> ca.Function:
+    from .codegen import compiled
+    return compiled(residual_kernel(ch), with_jacobian=True)
+
+
+@functools.lru_cache(maxsize=8)
+def handles_kernel(ch: Character, names: tuple[str, ...]) -> ca.Function:
+    q = ca.SX.sym("q", N_DOF)
+    tr = frame_transforms(ch, q)
+    return ca.Function("handles", [q], [ca.vertcat(*[handle_position(ch, q, n, tr) for n in names])])
+
+
+def theta_kernel_vector(style: Style) -> np.ndarray:
+    return np.concatenate([style.ks1, style.ks2, style.kd, style.q_rest, [style.k_shoe, style.h_rest]])
+
+
+# --- transcription --------------------------------------------------------------------------
+
+@dataclass
+class Built:
+    """A transcribed problem: the IPOPT solver and what is needed to read its solution."""
+
+    sp: Subproblem
+    solver: ca.Function
+    x0: np.ndarray
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    p: np.ndarray
+    unpack: ca.Function  # x, p -> ctrl, warp, foot xy, energy terms
+    groups: list  # (name, slice into g, kind)
+    s_points: np.ndarray
+    contact_index: list  # (handle, k, slice into λ)
+    lam_slice: slice
+    free_steps: list
+    g_fn: ca.Function
+    energy_fn: ca.Function
+
+
+def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
+    """Control points free under the window: those whose support lies inside it (or meets it)."""
+    if sp.window is None:
+        return np.ones(n_ctrl, bool)
+    s0, s1 = sp.motion.to_canonical([sp.window[0], sp.window[1]])
+    knots = np.linspace(0, 1, n_ctrl - 2)
+    mask = np.zeros(n_ctrl, bool)
+    for i in range(n_ctrl):
+        lo = knots[max(0, i - 3)]
+        hi = knots[min(len(knots) - 1, i + 1)] if i + 1 < len(knots) else 1.0
+        mask[i] = (hi > s0 + 1e-9) and (lo < s1 - 1e-9)
+    return mask
+
+
+def build(sp: Subproblem) -> Built:
+    ch, m = sp.character, sp.motion
+    K, nW = m.n_ctrl, len(m.warp)
+    mg = ch.total_mass * G
+    N = max(8, int(round(m.duration * sp.collocation_hz)) + 1)
+    s = np.linspace(0.0, 1.0, N)
+    wq = np.full(N, 1.0 / (N - 1))
+    wq[[0, -1]] *= 0.5
+    B0, B1, B2 = (basis(K, s, d) for d in (0, 1, 2))
+    W1, W2 = basis(nW, s, 1), basis(nW, s, 2)
+    t_init = m.time(s)
+
+    # free / fixed control points
+    mask = _window_mask(sp, K) if "q" in sp.free else np.zeros(K, bool)
+    free_idx = np.flatnonzero(np.repeat(mask[:, None], N_DOF, axis=1).ravel())
+    xP = ca.MX.sym("P", len(free_idx))
+    P_fixed = ca.MX.sym("P_fixed", K * N_DOF)  # parameter: current control points
+    sel = np.zeros((K * N_DOF, len(free_idx)))
+    sel[free_idx, np.arange(len(free_idx))] = 1.0
+    keep = np.ones(K * N_DOF)
+    keep[free_idx] = 0.0
+    P_flat = ca.DM(keep) * P_fixed + ca.mtimes(ca.DM(sel), xP)
+    P = ca.reshape(P_flat, N_DOF, K).T  # row-major flatten of (K, 35)
+
+    warp_free = "warp" in sp.free
+    xW = ca.MX.sym("W", nW if warp_free else 0)
+    W_fixed = ca.MX.sym("W_fixed", nW)
+    warp = xW if warp_free else W_fixed
+
+    free_steps = [i for i, f in enumerate(sp.footsteps) if f.free and "footprints" in sp.free]
+    xF = ca.MX.sym("F", 2 * len(free_steps))
+
+    # contacts: (handle, k) pairs planted by footsteps, λ per pair
+    planted = []  # (handle, k, target xy expr, step index)
+    for si, step in enumerate(sp.footsteps):
+        pos = None
+        if si in free_steps:
+            j = free_steps.index(si)
+            pos = (xF[2 * j], xF[2 * j + 1])
+        for handle, (ta, tb), xy in contact_points(ch, step, pos):
+            sa, sb = m.to_canonical([ta, tb])
+            for k in np.flatnonzero((s >= sa - 1e-9) & (s <= sb + 1e-9)):
+                planted.append((handle, int(k), xy, si))
+    n_lam = 4 * len(planted)
+    xL = ca.MX.sym("L", n_lam)
+    V = friction_basis()
+    force_rows = {h: i for i, h in enumerate(FORCE_HANDLES)}
+    Fmap = np.zeros((3 * len(FORCE_HANDLES) * N, n_lam))  # column-major (3*8, N) flattened
+    for c, (handle, k, _, _) in enumerate(planted):
+        r0 = k * 3 * len(FORCE_HANDLES) + 3 * force_rows[handle]
+        Fmap[r0:r0 + 3, 4 * c:4 * c + 4] = mg * V
+    Fc = ca.reshape(ca.mtimes(ca.DM(Fmap), xL), 3 * len(FORCE_HANDLES), N)
+
+    # parameters: fixed data and per-point style
+    TH = ca.MX.sym("theta", N_THETA, N)
+    SA = ca.MX.sym("sqrt_alpha", N_JOINT, N)
+    p = ca.vertcat(P_fixed, W_fixed, ca.vec(TH), ca.vec(SA))
+
+    Q, Q1, Q2 = (ca.mtimes(ca.DM(Bd), P).T for Bd in (B0, B1, B2))  # (35, N)
+    T1 = ca.mtimes(ca.DM(W1), warp).T  # (1, N)
+    T2 = ca.mtimes(ca.DM(W2), warp).T
+    Qd = Q1 / ca.repmat(T1, N_DOF, 1)
+    Qdd = Q2 / ca.repmat(T1 ** 2, N_DOF, 1) - Q1 * ca.repmat(T2 / T1 ** 3, N_DOF, 1)
+
+    kern = compiled_kernel(ch).map(N)
+    QQ = kern(Q, Qd, Qdd, Fc, TH)  # (35, N)
+    w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
+    scale = 1.0 / mg  # residuals in units of body weight
+    wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
+    rho_m = SA * QQ[:N_JOINT, :]
+    rho_0 = np.sqrt(w_r) * QQ[N_JOINT:, :]
+    rho_dyn = ca.vec(ca.vertcat(rho_m, rho_0) * ca.repmat(wt, N_DOF, 1)) * scale
+    energy = ca.sumsqr(ca.vec(rho_m * ca.repmat(wt, N_JOINT, 1)))  # Σ w T' α Q_m²
+    root_energy = ca.sumsqr(ca.vec(QQ[N_JOINT:, :] * ca.repmat(wt, N_ROOT, 1)))
+
+    rho_extra = [1e-3 * xL]  # tiny λ regularisation keeps the contact split well posed
+    hk_names = tuple(sorted({t.handle for t in sp.targets} | {a.handle for a in sp.avoid}
+                            | set(CONTACT_HANDLES) | {"ankle_l", "ankle_r"}))
+    hk = handles_kernel(ch, hk_names)
+    HP = hk.map(N)(Q)  # (3*len, N)
+
+    def hpos(name, k):
+        i = hk_names.index(name)
+        return HP[3 * i:3 * i + 3, k]
+
+    def state_at(t):
+        sk = float(m.to_canonical([t])[0])
+        b0, b1 = ca.DM(basis(K, [sk], 0)), ca.DM(basis(K, [sk], 1))
+        t1 = ca.mtimes(ca.DM(basis(nW, [sk], 1)), warp)
+        return ca.mtimes(b0, P).T, ca.mtimes(b1, P).T / t1, sk
+
+    g, lbg, ubg, groups = [], [], [], []
+
+    def add(name, expr, lo, hi, kind="eq"):
+        expr = ca.vec(expr)
+        n0 = sum(int(e.numel()) for e in g)
+        g.append(expr)
+        lbg.extend(np.broadcast_to(lo, expr.shape[0]).tolist())
+        ubg.extend(np.broadcast_to(hi, expr.shape[0]).tolist())
+        groups.append((name, slice(n0, n0 + expr.shape[0]), kind))
+
+    for targ in sp.targets:
+        q_t, _, sk = state_at(targ.t)
+        pos = hk(q_t)
+        i = hk_names.index(targ.handle)
+        d = pos[3 * i:3 * i + 3] - ca.DM(targ.point)
+        if targ.hard:
+            add(f"{targ.name}:{targ.handle}", d, 0.0, 0.0)
+        else:
+            rho_extra.append(np.sqrt(targ.weight) * d)
+    for pose in sp.poses:
+        q_t, qd_t, _ = state_at(pose.t)
+        rho_extra.append(np.sqrt(pose.weight) * (q_t - ca.DM(pose.q)))
+        if pose.velocity is not None:
+            rho_extra.append(0.1 * np.sqrt(pose.weight) * (qd_t - ca.DM(pose.velocity)))
+    for a in sp.avoid:
+        q_t, _, _ = state_at(a.t)
+        i = hk_names.index(a.handle)
+        d = hk(q_t)[3 * i:3 * i + 3] - ca.DM(a.center)
+        add(f"avoid:{a.handle}", ca.sumsqr(d) - a.radius ** 2, 0.0, np.inf, "ineq")
+
+    # footsteps: planted handles at their footprint on the ground
+    if planted:
+        rows = [hpos(h, k) - ca.vertcat(xy[0], xy[1], 0.0) for h, k, xy, _ in planted]
+        add("footstep", ca.vertcat(*rows), 0.0, 0.0)
+    # ground non-penetration of every foot handle at every point
+    ground = ca.vertcat(*[HP[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
+    add("penetration", ground, 0.0, np.inf, "ineq")
+    # feet not crossing: left ankle stays left of the right one, in the pelvis heading frame
+    yaw = Q[3, :]
+    dl = HP[3 * hk_names.index("ankle_l"):3 * hk_names.index("ankle_l") + 2, :] - \
+        HP[3 * hk_names.index("ankle_r"):3 * hk_names.index("ankle_r") + 2, :]
+    lateral = -ca.sin(yaw) * dl[0, :] + ca.cos(yaw) * dl[1, :]
+    add("feet_crossing", lateral, sp.min_foot_separation, np.inf, "ineq")
+    # monotone warp with a minimum slope (world seconds per unit s)
+    if warp_free:
+        add("warp_monotone", xW[1:] - xW[:-1], 0.05 * m.duration / nW, np.inf, "ineq")
+        if sp.fix_start_time:
+            add("start_time", xW[0] - m.start, 0.0, 0.0)
+        if sp.fix_end_time:
+            add("end_time", xW[-1] - m.end, 0.0, 0.0)
+
+    # variable bounds: joint limits on control points, λ ≥ 0, footprints within 0.5 m
+    lo, hi = ch.lower, ch.upper
+    ctrl0 = np.asarray(m.ctrl, float)
+    lbx = [np.tile(lo, K)[free_idx], np.full(xW.shape[0], -np.inf), [], np.zeros(n_lam)]
+    ubx = [np.tile(hi, K)[free_idx], np.full(xW.shape[0], np.inf), [], np.full(n_lam, np.inf)]
+    x0 = [ctrl0.ravel()[free_idx], np.asarray(m.warp, float) if warp_free else [], [],
+          np.full(n_lam, 0.25 / max(1, 2))]
+    fp0 = []
+    for si in free_steps:
+        fp0 += list(sp.footsteps[si].position)
+    lbx[2] = np.asarray(fp0) - 0.5
+    ubx[2] = np.asarray(fp0) + 0.5
+    x0[2] = np.asarray(fp0)
+
+    x = ca.vertcat(xP, xW, xF, xL)
+    rho = ca.vertcat(rho_dyn, *[ca.vec(r) for r in rho_extra])
+    f = ca.sumsqr(rho)
+    gg = ca.vertcat(*g)
+
+    # Gauss–Newton Hessian of the objective + exact Hessian of the (kinematic) constraints
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", gg.shape[0])
+    J = ca.jacobian(rho, x)
+    Hc = ca.hessian(ca.dot(lam_g, gg), x)[0] if gg.shape[0] else ca.MX(x.shape[0], x.shape[0])
+    H = ca.triu(2 * lam_f * ca.mtimes(J.T, J) + Hc)
+    hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+
+    opts = {
+        "hess_lag": hess, "print_time": False,
+        "ipopt": {"print_level": 0, "max_iter": sp.max_iter, "tol": sp.tol, "acceptable_tol": 1e-4,
+                  "acceptable_iter": 5, "mu_strategy": "adaptive", "linear_solver": "mumps", "sb": "yes"},
+    }
+    solver = ca.nlpsol(f"step_{sp.label}", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
+
+    th = theta_kernel_vector(sp.style)
+    sa = np.sqrt(np.asarray(sp.style.alpha, float))
+    if sp.style_end is not None:
+        wgt = np.clip((t_init - sp.window[0]) / (sp.window[1] - sp.window[0]), 0, 1) if sp.window else s
+        th_end = theta_kernel_vector(sp.style_end)
+        sa_end = np.sqrt(np.asarray(sp.style_end.alpha, float))
+        TH0 = np.outer(th, 1 - wgt) + np.outer(th_end, wgt)
+        SA0 = np.outer(sa, 1 - wgt) + np.outer(sa_end, wgt)
+    else:
+        TH0, SA0 = np.tile(th[:, None], (1, N)), np.tile(sa[:, None], (1, N))
+    pv = np.concatenate([ctrl0.ravel(), np.asarray(m.warp, float), TH0.ravel(order="F"), SA0.ravel(order="F")])
+
+    unpack = ca.Function("unpack", [x, p], [P, warp, xF, energy, root_energy])
+    return Built(sp, solver, np.concatenate([np.ravel(a) for a in x0]),
+                 np.concatenate([np.ravel(a) for a in lbx]), np.concatenate([np.ravel(a) for a in ubx]),
+                 np.asarray(lbg, float), np.asarray(ubg, float), pv, unpack, groups, s,
+                 [(h, k, slice(xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c,
+                               xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4)) for c, (h, k, _, _) in enumerate(planted)],
+                 slice(xP.shape[0] + xW.shape[0] + xF.shape[0], x.shape[0]), free_steps,
+                 ca.Function("g", [x, p], [gg]), ca.Function("E", [x, p], [energy]))
+
+
+def violations(b: Built, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:
+    """Worst violation per constraint group (m for positions; 0 when satisfied)."""
+    gv = np.asarray(b.g_fn(x, b.p if p is None else p)).ravel()
+    out = {}
+    for name, sl, _ in b.groups:
+        lo, hi, v = b.lbg[sl], b.ubg[sl], gv[sl]
+        viol = np.maximum(np.maximum(lo - v, v - hi), 0.0)
+        key = name.split(":")[0] if name.startswith("target") else name
+        out[key] = max(out.get(key, 0.0), float(viol.max()) if viol.size else 0.0)
+    return out
+
+
+def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Result:
+    """Build (unless given) and solve a subproblem with IPOPT, warm-started from sp.motion."""
+    t_start = _time.perf_counter()
+    b = built or build(sp)
+    sol = b.solver(x0=b.x0, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, p=b.p)
+    stats = b.solver.stats()
+    x = np.asarray(sol["x"]).ravel()
+    P, W, F, E, E0 = (np.asarray(v) for v in b.unpack(x, b.p))
+    motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
+    steps = list(sp.footsteps)
+    for j, si in enumerate(b.free_steps):
+        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
+    viol = violations(b, x)
+    lam = x[b.lam_slice]
+    V = friction_basis()
+    mg = sp.character.total_mass * G
+    forces: dict = {}
+    for h, k, sl in b.contact_index:
+        forces.setdefault(h, []).append((float(motion.time([b.s_points[k]])[0]), mg * V @ x[sl]))
+    contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
+    status = stats.get("return_status", "unknown")
+    ok = bool(stats.get("success", False)) or status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    return Result(motion, tuple(steps), status, ok, int(stats.get("iter_count", -1)),
+                  _time.perf_counter() - t_start, float(np.ravel(E)[0]), float(np.ravel(sol["f"])[0]), viol, contact, sp.label)
