@@ -18,6 +18,7 @@ from .motion import Motion
 __all__ = ["initial_motion", "leg_phase", "example_gait_pose"]
 
 D = np.deg2rad
+ROOT_HEIGHT = 0.95  # initial pelvis height as a fraction of the standing height
 
 
 def leg_phase(footsteps: tuple[Footstep, ...], foot: str, t: float) -> tuple[str, float]:
@@ -92,7 +93,7 @@ def _root_path(footsteps: tuple[Footstep, ...], times: np.ndarray):
 
 
 def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1: float,
-                   ctrl_per_second: float = 14.0, run: bool = False,
+                   ctrl_per_second: float = 24.0, run: bool = False,
                    example=None) -> Motion:
     """An initial motion over [t0, t1] (s) for the given footsteps.
 
@@ -117,7 +118,7 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
             q[i] = ex_q[j]
         q[i, 0:2] = xy[i]
         q[i, 3] = heading[i]
-        q[i, 2] = stand[2] * (0.97 if not run else 0.95)
+        q[i, 2] = stand[2] * (ROOT_HEIGHT if not run else ROOT_HEIGHT - 0.02)
         q[i, 4] = np.deg2rad(3 if not run else 8)  # slight forward lean
     return Motion.from_samples(times, q, max(6, int(round((t1 - t0) * ctrl_per_second)) + 3))
 

@@ -24,6 +24,7 @@ handle targets and poses (continuations).
 from __future__ import annotations
 
 import functools
+import os as _os
 import time as _time
 from dataclasses import dataclass, field, replace
 
@@ -41,6 +42,8 @@ __all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Avoid", "Result", "solve
            "CONTACT_HANDLES", "residual_kernel", "W_ROOT"]
 
 W_ROOT = 100.0  # paper: weight of the root residual
+OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
+KIN_WEIGHT = 3.0  # pull toward the initial motion in kinematic pre-solves
 CONTACT_HANDLES = ("heel_l", "ball_l", "toe_l", "heel_r", "ball_r", "toe_r")
 FORCE_HANDLES = CONTACT_HANDLES + ("palm_l", "palm_r")
 N_THETA = 4 * N_JOINT + 2  # style numbers the kernel needs: ks1, ks2, kd, q_rest, k_shoe, h_rest
@@ -90,7 +93,8 @@ class Subproblem:
     "q" (spline control points), "warp", "footprints" (positions of footsteps with
     ``free=True``); λ is always free where a handle is planted.  ``dynamics`` is "full"
     (energy with w_r) or "relaxed" (root residual weight divided by 100: timing steps).
-    ``style_end`` blends θ linearly over the window toward another style (transitions).
+    "kinematic" drops the dynamics and stays near the initial motion (a kinematic
+    pre-solve that makes the initial guess satisfy the constraints).  ``style_end`` blends θ linearly over the window toward another style (transitions).
     """
 
     character: Character
@@ -109,7 +113,7 @@ class Subproblem:
     fix_end_time: bool = True
     min_foot_separation: float = 0.06
     max_iter: int = 300
-    tol: float = 1e-6
+    tol: float = 1e-4
     label: str = "step"
 
 
@@ -174,6 +178,13 @@ def theta_kernel_vector(style: Style) -> np.ndarray:
     return np.concatenate([style.ks1, style.ks2, style.kd, style.q_rest, [style.k_shoe, style.h_rest]])
 
 
+def _sparse(a: np.ndarray) -> ca.DM:
+    """A constant matrix with its structural zeros dropped (keeps Jacobians sparse)."""
+    a = np.asarray(a, float)
+    a = np.where(np.abs(a) < 1e-14, 0.0, a)
+    return ca.sparsify(ca.DM(a))
+
+
 # --- transcription --------------------------------------------------------------------------
 
 @dataclass
@@ -212,14 +223,40 @@ def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     return mask
 
 
+def _collocation_grid(sp: Subproblem, ch: Character) -> np.ndarray:
+    """Uniform points in s plus every contact interval's ends (so a footprint holds exactly
+    from touch-down to lift-off); uniform points too close to an end are dropped."""
+    m = sp.motion
+    n = max(8, int(round(m.duration * sp.collocation_hz)) + 1)
+    uniform = np.linspace(0.0, 1.0, n)
+    ends = []
+    for step in sp.footsteps:
+        for _, (ta, tb), _ in contact_points(ch, step):
+            ends += [t for t in (ta, tb) if m.start < t < m.end]
+    ends = np.unique(np.round(m.to_canonical(ends), 9)) if ends else np.zeros(0)
+    h = 1.0 / (n - 1)
+    keep = [u for u in uniform if u in (0.0, 1.0) or not np.any(np.abs(ends - u) < 0.4 * h)]
+    grid = np.unique(np.r_[keep, ends])
+    # merge ends closer than 0.4 h to each other or to the window ends
+    out = [grid[0]]
+    for v in grid[1:]:
+        if v - out[-1] >= 0.4 * h or v == 1.0:
+            if v == 1.0 and 1.0 - out[-1] < 0.4 * h and len(out) > 1:
+                out[-1] = 1.0
+                continue
+            out.append(v)
+    return np.array(out)
+
+
 def build(sp: Subproblem) -> Built:
     ch, m = sp.character, sp.motion
     K, nW = m.n_ctrl, len(m.warp)
     mg = ch.total_mass * G
-    N = max(8, int(round(m.duration * sp.collocation_hz)) + 1)
-    s = np.linspace(0.0, 1.0, N)
-    wq = np.full(N, 1.0 / (N - 1))
-    wq[[0, -1]] *= 0.5
+    s = _collocation_grid(sp, ch)
+    N = len(s)
+    wq = np.zeros(N)  # trapezoid weights in s
+    wq[1:] += np.diff(s) / 2
+    wq[:-1] += np.diff(s) / 2
     B0, B1, B2 = (basis(K, s, d) for d in (0, 1, 2))
     W1, W2 = basis(nW, s, 1), basis(nW, s, 2)
     t_init = m.time(s)
@@ -233,7 +270,7 @@ def build(sp: Subproblem) -> Built:
     sel[free_idx, np.arange(len(free_idx))] = 1.0
     keep = np.ones(K * N_DOF)
     keep[free_idx] = 0.0
-    P_flat = ca.DM(keep) * P_fixed + ca.mtimes(ca.DM(sel), xP)
+    P_flat = ca.sparsify(ca.DM(keep)) * P_fixed + ca.mtimes(_sparse(sel), xP)
     P = ca.reshape(P_flat, N_DOF, K).T  # row-major flatten of (K, 35)
 
     warp_free = "warp" in sp.free
@@ -245,7 +282,8 @@ def build(sp: Subproblem) -> Built:
     xF = ca.MX.sym("F", 2 * len(free_steps))
 
     # contacts: (handle, k) pairs planted by footsteps, λ per pair
-    planted = []  # (handle, k, target xy expr, step index)
+    planted = []  # (handle, k, target xy expr, step index): contact force at grid point k
+    pins = []  # (handle, s, target xy expr): footstep position constraints
     for si, step in enumerate(sp.footsteps):
         pos = None
         if si in free_steps:
@@ -253,33 +291,36 @@ def build(sp: Subproblem) -> Built:
             pos = (xF[2 * j], xF[2 * j + 1])
         for handle, (ta, tb), xy in contact_points(ch, step, pos):
             sa, sb = m.to_canonical([ta, tb])
-            for k in np.flatnonzero((s >= sa - 1e-9) & (s <= sb + 1e-9)):
+            ks = np.flatnonzero((s >= sa - 1e-9) & (s <= sb + 1e-9))
+            for k in ks:
                 planted.append((handle, int(k), xy, si))
-    n_lam = 4 * len(planted)
+            for k in ks:
+                pins.append((handle, float(s[k]), xy))
+    n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
     xL = ca.MX.sym("L", n_lam)
     V = friction_basis()
     force_rows = {h: i for i, h in enumerate(FORCE_HANDLES)}
     Fmap = np.zeros((3 * len(FORCE_HANDLES) * N, n_lam))  # column-major (3*8, N) flattened
-    for c, (handle, k, _, _) in enumerate(planted):
+    for c, (handle, k, _, _) in enumerate(planted if n_lam else []):
         r0 = k * 3 * len(FORCE_HANDLES) + 3 * force_rows[handle]
         Fmap[r0:r0 + 3, 4 * c:4 * c + 4] = mg * V
-    Fc = ca.reshape(ca.mtimes(ca.DM(Fmap), xL), 3 * len(FORCE_HANDLES), N)
+    Fc = ca.reshape(ca.mtimes(_sparse(Fmap), xL), 3 * len(FORCE_HANDLES), N)
 
     # parameters: fixed data and per-point style
     TH = ca.MX.sym("theta", N_THETA, N)
     SA = ca.MX.sym("sqrt_alpha", N_JOINT, N)
     p = ca.vertcat(P_fixed, W_fixed, ca.vec(TH), ca.vec(SA))
 
-    Q, Q1, Q2 = (ca.mtimes(ca.DM(Bd), P).T for Bd in (B0, B1, B2))  # (35, N)
-    T1 = ca.mtimes(ca.DM(W1), warp).T  # (1, N)
-    T2 = ca.mtimes(ca.DM(W2), warp).T
+    Q, Q1, Q2 = (ca.mtimes(_sparse(Bd), P).T for Bd in (B0, B1, B2))  # (35, N)
+    T1 = ca.mtimes(_sparse(W1), warp).T  # (1, N)
+    T2 = ca.mtimes(_sparse(W2), warp).T
     Qd = Q1 / ca.repmat(T1, N_DOF, 1)
     Qdd = Q2 / ca.repmat(T1 ** 2, N_DOF, 1) - Q1 * ca.repmat(T2 / T1 ** 3, N_DOF, 1)
 
     kern = compiled_kernel(ch).map(N)
     QQ = kern(Q, Qd, Qdd, Fc, TH)  # (35, N)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
-    scale = 1.0 / mg  # residuals in units of body weight
+    scale = OBJ_SCALE / mg  # residuals in units of body weight, objective O(1–100)
     wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
     rho_m = SA * QQ[:N_JOINT, :]
     rho_0 = np.sqrt(w_r) * QQ[N_JOINT:, :]
@@ -287,20 +328,18 @@ def build(sp: Subproblem) -> Built:
     energy = ca.sumsqr(ca.vec(rho_m * ca.repmat(wt, N_JOINT, 1)))  # Σ w T' α Q_m²
     root_energy = ca.sumsqr(ca.vec(QQ[N_JOINT:, :] * ca.repmat(wt, N_ROOT, 1)))
 
+    if sp.dynamics == "kinematic":  # stay close to the initial motion; no dynamics at all
+        rho_dyn = ca.vec(P_flat - P_fixed) * KIN_WEIGHT
     rho_extra = [1e-3 * xL]  # tiny λ regularisation keeps the contact split well posed
     hk_names = tuple(sorted({t.handle for t in sp.targets} | {a.handle for a in sp.avoid}
                             | set(CONTACT_HANDLES) | {"ankle_l", "ankle_r"}))
     hk = handles_kernel(ch, hk_names)
     HP = hk.map(N)(Q)  # (3*len, N)
 
-    def hpos(name, k):
-        i = hk_names.index(name)
-        return HP[3 * i:3 * i + 3, k]
-
     def state_at(t):
         sk = float(m.to_canonical([t])[0])
-        b0, b1 = ca.DM(basis(K, [sk], 0)), ca.DM(basis(K, [sk], 1))
-        t1 = ca.mtimes(ca.DM(basis(nW, [sk], 1)), warp)
+        b0, b1 = _sparse(basis(K, [sk], 0)), _sparse(basis(K, [sk], 1))
+        t1 = ca.mtimes(_sparse(basis(nW, [sk], 1)), warp)
         return ca.mtimes(b0, P).T, ca.mtimes(b1, P).T / t1, sk
 
     g, lbg, ubg, groups = [], [], [], []
@@ -334,8 +373,11 @@ def build(sp: Subproblem) -> Built:
         add(f"avoid:{a.handle}", ca.sumsqr(d) - a.radius ** 2, 0.0, np.inf, "ineq")
 
     # footsteps: planted handles at their footprint on the ground
-    if planted:
-        rows = [hpos(h, k) - ca.vertcat(xy[0], xy[1], 0.0) for h, k, xy, _ in planted]
+    if pins:
+        s_pin = np.array([sv for _, sv, _ in pins])
+        HPp = hk.map(len(pins))(ca.mtimes(_sparse(basis(K, s_pin, 0)), P).T)
+        rows = [HPp[3 * hk_names.index(h):3 * hk_names.index(h) + 3, c] - ca.vertcat(xy[0], xy[1], 0.0)
+                for c, (h, _, xy) in enumerate(pins)]
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
     # ground non-penetration of every foot handle at every point
     ground = ca.vertcat(*[HP[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
@@ -369,7 +411,7 @@ def build(sp: Subproblem) -> Built:
     x0[2] = np.asarray(fp0)
 
     x = ca.vertcat(xP, xW, xF, xL)
-    rho = ca.vertcat(rho_dyn, *[ca.vec(r) for r in rho_extra])
+    rho = ca.vertcat(rho_dyn, *[OBJ_SCALE * ca.vec(r) for r in rho_extra])
     f = ca.sumsqr(rho)
     gg = ca.vertcat(*g)
 
@@ -383,7 +425,7 @@ def build(sp: Subproblem) -> Built:
 
     opts = {
         "hess_lag": hess, "print_time": False,
-        "ipopt": {"print_level": 0, "max_iter": sp.max_iter, "tol": sp.tol, "acceptable_tol": 1e-4,
+        "ipopt": {"print_level": int(_os.environ.get("COMPOSE_IPOPT_PRINT", "0")), "max_iter": sp.max_iter, "tol": sp.tol, "acceptable_tol": 1e-4,
                   "acceptable_iter": 5, "mu_strategy": "adaptive", "linear_solver": "mumps", "sb": "yes"},
     }
     solver = ca.nlpsol(f"step_{sp.label}", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
@@ -405,7 +447,8 @@ def build(sp: Subproblem) -> Built:
                  np.concatenate([np.ravel(a) for a in lbx]), np.concatenate([np.ravel(a) for a in ubx]),
                  np.asarray(lbg, float), np.asarray(ubg, float), pv, unpack, groups, s,
                  [(h, k, slice(xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c,
-                               xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4)) for c, (h, k, _, _) in enumerate(planted)],
+                               xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4))
+                  for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
                  slice(xP.shape[0] + xW.shape[0] + xF.shape[0], x.shape[0]), free_steps,
                  ca.Function("g", [x, p], [gg]), ca.Function("E", [x, p], [energy]))
 

@@ -1,0 +1,46 @@
+"""Synthesis from footprints in one call: initialise, pre-solve kinematics, solve, audit.
+
+This is the paper's basic task (§7): given footprints and a style, the motion that
+minimises weighted muscle effort subject to the dynamics.  The schedule executor runs the
+same pieces step by step; this module is the direct path used by examples and benchmarks.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from .audit import Audit, audit_motion
+from .body import Character
+from .footsteps import Footstep
+from .gait import initial_motion
+from .motion import Motion
+from .spacetime import Result, Subproblem, solve
+from .style import Style
+
+__all__ = ["Synthesis", "synthesize", "presolve_kinematics"]
+
+
+@dataclass(frozen=True)
+class Synthesis:
+    result: Result
+    audit: Audit
+    presolve: Result | None
+    seconds: float
+
+
+def presolve_kinematics(ch: Character, style: Style, motion: Motion, footsteps: tuple[Footstep, ...],
+                        **kw) -> Result:
+    """Make an initial motion satisfy footsteps and ground constraints (no dynamics)."""
+    return solve(Subproblem(ch, style, motion, footsteps, free=frozenset({"q"}), dynamics="kinematic",
+                            label="kinematic", **kw))
+
+
+def synthesize(ch: Character, style: Style, footsteps: tuple[Footstep, ...], t0: float, t1: float, *,
+               free=frozenset({"q"}), run: bool = False, init: Motion | None = None, example=None,
+               **subproblem) -> Synthesis:
+    """Synthesize a motion over world time [t0, t1] (s) that plants ``footsteps``."""
+    m0 = init or initial_motion(ch, footsteps, t0, t1, run=run, example=example)
+    pre = presolve_kinematics(ch, style, m0, footsteps)
+    start = pre.motion if pre.success else m0
+    res = solve(Subproblem(ch, style, start, footsteps, free=frozenset(free), label="synthesis", **subproblem))
+    aud = audit_motion(ch, style, res.motion, res.footsteps, res.contact_forces)
+    return Synthesis(res, aud, pre, pre.seconds + res.seconds)
