@@ -428,7 +428,7 @@ def build(sp: Subproblem) -> Built:
         "ipopt": {"print_level": int(_os.environ.get("COMPOSE_IPOPT_PRINT", "0")), "max_iter": sp.max_iter, "tol": sp.tol, "acceptable_tol": 1e-4,
                   "acceptable_iter": 5, "mu_strategy": "adaptive", "linear_solver": "mumps", "sb": "yes"},
     }
-    solver = ca.nlpsol(f"step_{sp.label}", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
+    solver = ca.nlpsol("spacetime", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
 
     th = theta_kernel_vector(sp.style)
     sa = np.sqrt(np.asarray(sp.style.alpha, float))
