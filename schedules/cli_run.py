@@ -1,0 +1,243 @@
+"""``compose run NAME|FILE``: scenario → schedule → solved Scene → USD stage + JSON report.
+
+Exit codes: 0 done; 2 bad input (scenario, arguments, a run folder that does not match on
+``--resume``); 1 a solve failed (the step and its violated constraint groups are named; the
+run folder keeps every finished step; no output stage is written).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from scenarios.errors import InputError, Location
+from scenarios.loader import find_scenario, load_scenario
+
+__all__ = ["register", "run_scenario", "goal_report"]
+
+
+def _versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+    out = {"python": platform.python_version()}
+    for pkg in ("compose-motion", "casadi", "numpy", "usd-core", "networkx", "pydantic"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def _check_output(value: str | None, default: Path) -> Path:
+    p = Path(value) if value is not None else default
+    if p.suffix.lower() not in (".usda", ".usdc", ".usdz"):
+        raise InputError(f"-o {p}: the output must end in .usda, .usdc or .usdz", Location(str(p)))
+    if p.exists() and p.is_dir():
+        raise InputError(f"-o {p}: is a directory", Location(str(p)))
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"-o {p}: folder {parent} does not exist", Location(str(p)))
+    return p
+
+
+# --- goal and coupling checks -------------------------------------------------------------------
+
+def goal_report(scene, contact_audits: dict | None = None) -> tuple[dict, dict]:
+    """({goal: {holds, measured, tolerance, unit, what}}, {coupling: {...}}) from the final Scene."""
+    from scenegraph.scene import handle_track
+
+    goals = {}
+    for g in scene.goals:
+        me = scene.character(g.character)
+        if g.type == "footprints":
+            val = (contact_audits or {}).get(g.character, {}).get("footstep_error_max")
+            tol = 0.025
+            goals[g.name] = {"type": g.type, "what": "max distance of a planted handle from its footprint, "
+                             "sampled at 120 Hz (solver enforces it exactly at collocation points)",
+                             "measured": val, "tolerance": tol, "unit": "m",
+                             "holds": bool(val is not None and val <= tol)}
+        elif g.type == "walk_to":
+            (x, y), _ = g.data
+            p = handle_track(me, "pelvis", [g.time])[0]
+            d = float(np.hypot(p[0] - x, p[1] - y))
+            goals[g.name] = {"type": g.type, "what": "horizontal pelvis distance from the target at the time",
+                             "measured": d, "tolerance": g.tolerance, "unit": "m", "holds": d <= g.tolerance}
+        elif g.type == "reach":
+            handle, point = g.data
+            d = float(np.linalg.norm(handle_track(me, handle, [g.time])[0] - np.asarray(point)))
+            goals[g.name] = {"type": g.type, "what": f"{handle} distance from the target at the time",
+                             "measured": d, "tolerance": g.tolerance, "unit": "m", "holds": d <= g.tolerance}
+        elif g.type == "tackle":
+            other = scene.character(g.partner)
+            dt = 0.02
+            c0 = handle_track(me, "chest", [g.time - dt, g.time, g.time + dt])
+            o = handle_track(other, "chest", [g.time])[0]
+            d = float(np.linalg.norm(c0[1] - o))
+            u = (o - c0[1]) / max(np.linalg.norm(o - c0[1]), 1e-9)
+            speed = float(np.dot((c0[2] - c0[0]) / (2 * dt), u))
+            min_speed = g.data[0]
+            goals[g.name] = {"type": g.type, "what": "chest-to-chest distance at impact; chest speed toward target",
+                             "measured": d, "tolerance": 0.45, "unit": "m", "speed": speed, "min_speed": min_speed,
+                             "holds": bool(d <= 0.45 and speed >= min_speed)}
+        elif g.type == "avoid":
+            other = scene.character(g.partner)
+            o = handle_track(other, "chest", [g.time])[0]
+            d = min(float(np.linalg.norm(handle_track(me, h, [g.time])[0] - o)) for h in ("pelvis", "chest"))
+            goals[g.name] = {"type": g.type, "what": "closest pelvis/chest distance to the other's chest",
+                             "measured": d, "tolerance": g.data[0], "unit": "m (must be >=)",
+                             "holds": d >= g.data[0] - 1e-3}
+        elif g.type == "style_change":
+            goals[g.name] = {"type": g.type, "what": "style timeline applied (θ blended across the seam)",
+                             "measured": None, "tolerance": None, "holds": True}
+    couplings = {}
+    for c in scene.couplings:
+        t = np.linspace(c.interval[0], c.interval[1], max(2, int((c.interval[1] - c.interval[0]) * 30) + 1))
+        tracks = [handle_track(scene.character(w), h, t) for w, h in c.handles]
+        centre = np.mean(tracks, axis=0)
+        d = float(max(np.linalg.norm(tr - centre, axis=1).max() for tr in tracks)) * (2 if len(tracks) == 2 else 1)
+        couplings[c.name] = {"type": c.type, "what": "max distance between the held handles over the interval"
+                             if len(tracks) == 2 else "max distance of a holder's handle from their centre",
+                             "measured": d, "tolerance": c.tolerance, "unit": "m", "holds": d <= c.tolerance}
+    return goals, couplings
+
+
+# --- the command -------------------------------------------------------------------------------
+
+def run_scenario(name_or_file: str, *, out: str | None = None, report: str | None = None, jobs: int = 1,
+                 resume: bool = False, run_dir: str | None = None, fps: float = 30.0, log=sys.stderr) -> dict:
+    """Run a scenario end to end; returns the report dict.  Raises ComposeError on failure."""
+    from scenegraph.audit import audit_motion
+    from scenegraph.scene import build_scene
+    from scenegraph.usd_export import CharacterTrack, Marker, export_usd
+
+    from .cli_scenario import check_scenario
+    from .compiler import compile_schedule
+    from .executor import _atomic_text, run_fingerprint, run_schedule
+
+    t0 = time.perf_counter()
+    if jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    if not (0 < fps <= 1000):
+        raise InputError(f"--fps must be in (0, 1000], got {fps}")
+    scn = load_scenario(name_or_file)
+    check_scenario(scn)
+    source = Path(find_scenario(name_or_file))
+    out_path = _check_output(out, Path(f"{scn.name}.usda"))
+    rdir = Path(run_dir) if run_dir else Path("runs") / scn.name
+    report_path = Path(report) if report else rdir / "report.json"
+    if report_path.exists() and report_path.is_dir():
+        raise InputError(f"--report {report_path}: is a directory")
+    if report and not (report_path.parent if str(report_path.parent) else Path(".")).is_dir():
+        raise InputError(f"--report {report_path}: folder {report_path.parent} does not exist")
+
+    schedule = compile_schedule(scn)
+    scene = build_scene(scn)
+    fp = run_fingerprint(source.read_text(encoding="utf-8"), schedule)
+    print(f"compose: running {scn.name!r}: {len(schedule)} steps, {len(schedule.generations())} generation(s), "
+          f"jobs {jobs}, run folder {rdir}", file=log, flush=True)
+    result = run_schedule(scene, schedule, run_dir=rdir, fingerprint=fp, jobs=jobs, resume=resume, log=log)
+    final = result.scene
+
+    audits = {}
+    for c in final.characters:
+        a = audit_motion(c.character, c.style, c.motion, c.footsteps, result.contact_forces.get(c.name))
+        audits[c.name] = a.to_dict()
+    goals, couplings = goal_report(final, audits)
+
+    # --- outputs: the stage, then the report (the stage is what a failure must not half-write)
+    tracks, markers = [], []
+    for c in final.characters:
+        times, q = c.motion.sample(fps)
+        tracks.append(CharacterTrack(c.name, c.character, np.asarray(q, float), float(times[0])))
+        for i, f in enumerate(c.footsteps):
+            markers.append(Marker(f"{c.name}_footprint_{i}", "footprint", (f.position[0], f.position[1], 0.0),
+                                  (f.t0, f.t1), character=c.name))
+    for g in final.goals:
+        if g.type == "walk_to":
+            (x, y), _ = g.data
+            markers.append(Marker(f"goal_{g.name}", "goal", (x, y, 0.05), None, 0.08, g.character))
+        elif g.type == "reach":
+            markers.append(Marker(f"goal_{g.name}", "goal", tuple(g.data[1]), None, 0.04, g.character))
+    energies = {c.name: float(sum(r.per_character[c.name]["energy"] for r in result.records
+                                  if r.id == last)) for c in final.characters
+                for last in [next((r.id for r in reversed(result.records)
+                                   if c.name in r.per_character and r.kind == "full"), None)]}
+    metadata = {"scenario": scn.name, "scenario_file": str(source),
+                "styles": {ref: where for ref, where in final.style_refs},
+                "versions": _versions(), "energies": energies}
+    export_usd(out_path, tracks, fps, markers=markers, metadata=metadata)
+
+    rep = {
+        "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),
+        "jobs": jobs, "resumed_steps": result.resumed, "fps": fps,
+        "steps": [r.to_dict() for r in result.records],
+        "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
+                                "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}
+                       for c in final.characters},
+        "goals": goals, "couplings": couplings,
+        "all_goals_hold": all(g["holds"] for g in goals.values()) and all(c["holds"] for c in couplings.values()),
+        "total_seconds": round(time.perf_counter() - t0, 3), "solve_seconds": round(result.seconds, 3),
+        "versions": _versions(),
+    }
+    _atomic_text(json.dumps(rep, indent=1, default=_json_default) + "\n", report_path)
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        try:
+            from scenegraph.preview import write_report_plots
+            per_cycle: dict = {}
+            for r in result.records:
+                if r.kind == "full":
+                    for who, pc in r.per_character.items():
+                        per_cycle.setdefault(who, {})[r.cycle] = per_cycle.get(who, {}).get(r.cycle, 0.0) + pc["energy"]
+            energy = {who: [v for _, v in sorted(d.items())] for who, d in per_cycle.items()}
+            fps_ = [{"position": m.position, "character": m.character, "interval": m.interval}
+                    for m in markers if m.kind == "footprint"]
+            traj = {tr.name: np.asarray(tr.q)[:, :2] for tr in tracks}
+            write_report_plots(report_path.parent, energy=energy, footprints=fps_, trajectories=traj)
+        except Exception as exc:  # plots are a convenience; never fail a finished run on them
+            print(f"compose: warning: report plots not written: {exc}", file=log)
+    print(f"compose: wrote {out_path} and {report_path} in {rep['total_seconds']:.1f} s"
+          + ("" if rep["all_goals_hold"] else "; some goals/couplings do not hold (see the report)"),
+          file=log, flush=True)
+    return rep
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.bool_,)):
+        return bool(o)
+    raise TypeError(type(o).__name__)
+
+
+def _run(args) -> int:
+    run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
+                 run_dir=args.run_dir, fps=args.fps)
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="solve a scenario and write a USD stage and a report",
+                       description="Compile a scenario into its schedule, solve every step (with checkpoints in "
+                                   "the run folder) and write a USD stage plus a JSON report. Exit 2 on bad "
+                                   "input, 1 when a solve fails.")
+    p.add_argument("file", metavar="NAME|FILE", help="scenario file or bundled scenario name")
+    p.add_argument("-o", "--output", metavar="OUT.usda", help="USD stage (.usda, .usdc, .usdz); "
+                                                              "default <scenario name>.usda here")
+    p.add_argument("--report", metavar="R.json", help="JSON report; default <run folder>/report.json")
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="solve independent steps in N processes")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run from its run folder")
+    p.add_argument("--run-dir", metavar="DIR", help="checkpoint folder; default runs/<scenario name>")
+    p.add_argument("--fps", type=float, default=30.0, help="frame rate of the exported stage (default 30)")
+    p.set_defaults(func=_run)

@@ -1,0 +1,388 @@
+"""The executor: runs a Schedule over a Scene, step by step, with checkpoints.
+
+Semantics (kept identical for every ``--jobs``):
+
+* Steps run generation by generation (``Schedule.generations()``).  Every Step of a
+  generation reads the same snapshot — the Scene after all earlier generations — and
+  their results are merged into the Scene in the deterministic order of ``Step.sort_key``.
+  With ``jobs > 1`` the Steps of a generation are solved in separate processes
+  (``ProcessPoolExecutor``; IPOPT never runs in threads).  Steps of one generation for the
+  same character (time-layered windows) only write the control points of their window.
+* A Step frees each of its characters in turn (one ``Subproblem`` per character).  Before
+  the first Step of a character the initial motion is made kinematically feasible once.
+* Constraint times live in canonical time: after a Step that moved the timewarp, footstep
+  times are carried along (world time of the same canonical time under the new warp).
+* After every Step its result is written atomically to the run folder
+  (``steps/NNN.pkl``), so ``resume=True`` replays finished Steps and solves only the rest.
+* A Step fails if IPOPT does not report success or a hard constraint group is violated by
+  more than ``VIOLATION_TOL``; the run stops with :class:`StepFailed` (exit code 1), naming
+  the step and the violated groups.  The run folder keeps every finished Step.
+
+Test hook: ``COMPOSE_STOP_AFTER=N`` stops the process with exit code ``STOP_EXIT`` right
+after the N-th newly solved Step has been written; ``COMPOSE_MAX_ITER=N`` caps IPOPT
+iterations of every subproblem.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import pickle
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from scenarios.errors import ComposeError, InputError
+from scenegraph.footsteps import Footstep
+from scenegraph.motion import Motion
+from scenegraph.scene import Scene, coupling_targets, goal_targets, handle_track
+from scenegraph.spacetime import HandleTarget, Subproblem, _window_mask, solve
+from scenegraph.style import Style
+from scenegraph.synthesis import presolve_kinematics
+
+from .step import FULL, Schedule, Step
+
+__all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
+           "run_fingerprint"]
+
+STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
+VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
+FORMAT = 1  # run-folder format
+START_WEIGHT = 100.0
+
+
+class StepFailed(ComposeError):
+    """A Step did not converge or violates hard constraints (exit code 1)."""
+
+    exit_code = 1
+
+
+@dataclass
+class StepRecord:
+    index: int
+    id: str
+    kind: str
+    cycle: int
+    characters: tuple[str, ...]
+    status: str
+    success: bool
+    iterations: int
+    seconds: float
+    energy: float
+    violations: dict
+    presolve: dict | None = None
+    per_character: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"index": self.index, "id": self.id, "kind": self.kind, "cycle": self.cycle,
+                "characters": list(self.characters), "status": self.status, "success": self.success,
+                "iterations": self.iterations, "seconds": round(self.seconds, 3), "energy": self.energy,
+                "violations": self.violations, "presolve": self.presolve, "per_character": self.per_character}
+
+
+@dataclass
+class RunResult:
+    scene: Scene
+    records: list[StepRecord]
+    seconds: float
+    contact_forces: dict  # character -> contact forces of its last full step
+    resumed: int = 0
+
+
+# --- helpers ----------------------------------------------------------------------------------
+
+def run_fingerprint(scenario_text: str, schedule: Schedule) -> str:
+    h = hashlib.sha256()
+    h.update(scenario_text.encode())
+    h.update(schedule.to_json().encode())
+    h.update(str(FORMAT).encode())
+    return h.hexdigest()[:20]
+
+
+def _blend(a: Style, b: Style, w: float) -> Style:
+    if w <= 0.0 or a is b:
+        return a
+    if w >= 1.0:
+        return b
+    return Style.from_vector((1 - w) * a.vector() + w * b.vector(), name=f"{a.name}>{b.name}@{w:.2f}")
+
+
+def _style_at(scene: Scene, who: str, step: Step, t: float) -> Style:
+    st = scene.character(who)
+    tl = next((s for s in step.styles if s.character == who), None)
+    if tl is None:
+        return st.style
+    s0, s1, w = tl.at(t)
+    return _blend(st.style_of(s0), st.style_of(s1), w)
+
+
+def _world_window(motion: Motion, duration: float, window: tuple[float, float]) -> tuple[float, float]:
+    """Canonical seconds (world time of the initial uniform warp) → world time of ``motion``."""
+    s = np.clip(np.array(window, float) / duration, 0.0, 1.0)
+    t = motion.time(s)
+    return float(t[0]), float(t[1])
+
+
+def _remap_footsteps(old: Motion, new: Motion, steps: tuple[Footstep, ...]) -> tuple[Footstep, ...]:
+    if np.array_equal(np.asarray(old.warp), np.asarray(new.warp)):
+        return steps
+    out = []
+    for f in steps:
+        s = old.to_canonical([f.t0, f.t1])
+        t = new.time(s)
+        out.append(replace(f, t0=float(t[0]), t1=float(max(t[1], t[0] + 1e-3))))
+    return tuple(out)
+
+
+def _max_iter(default: int) -> int:
+    v = os.environ.get("COMPOSE_MAX_ITER")
+    return int(v) if v else default
+
+
+def _hard_violations(viol: dict) -> dict:
+    return {k: v for k, v in viol.items() if v > VIOLATION_TOL}
+
+
+def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndarray | None]:
+    st = scene.character(who)
+    m = st.motion
+    whole = step.window[0] <= 1e-9 and step.window[1] >= scene.duration - 1e-9
+    win = _world_window(m, scene.duration, step.window)
+    free = set()
+    if "q" in step.free:
+        free.add("q")
+    if "timewarp" in step.free and whole:  # windowed steps keep the warp (their neighbours hold it)
+        free.add("warp")
+    steps = st.footsteps
+    if "footprints" in step.free:
+        free.add("footprints")
+        # only footsteps entirely inside the window move; the rest are held where they are
+        steps = tuple(f if (whole or (f.t0 >= win[0] - 1e-6 and f.t1 <= win[1] + 1e-6)) else replace(f, free=False)
+                      for f in steps)
+    targets, avoid = goal_targets(scene, who, step.goals)
+    for cname in step.couplings:
+        w = step.term(f"coupling:{cname}")
+        if isinstance(w, (int, float)):
+            targets += coupling_targets(scene, who, cname, float(w), win)
+    if step.term("start") is not None and win[0] <= m.start + 1e-9:
+        x, y, _ = st.start
+        z = float(handle_track(st, "pelvis", [m.start])[0][2])
+        targets += (HandleTarget("pelvis", m.start, (x, y, z), START_WEIGHT, name="start"),)
+    style = _style_at(scene, who, step, step.window[0])
+    style_end = _style_at(scene, who, step, step.window[1])
+    if style_end is style:
+        style_end = None
+    sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
+                    dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid,
+                    style_end=style_end, max_iter=_max_iter(300 if step.kind == FULL else 200),
+                    label=step.id.replace("/", "_"))
+    mask = None if whole else _window_mask(sp, m.n_ctrl)
+    return sp, mask
+
+
+def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...]) -> dict:
+    """Solve one Step against ``scene`` (a snapshot); returns the data a checkpoint stores.
+
+    Top-level and pure (given its arguments) so that it runs the same in a worker process.
+    """
+    out: dict = {"step": step.id, "characters": {}}
+    cur = scene
+    for who in step.characters:
+        pre_info = None
+        if who in presolve:
+            st = cur.character(who)
+            pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps)
+            pre_info = {"status": pre.status, "success": pre.success, "iterations": pre.iterations,
+                        "seconds": pre.seconds}
+            if pre.success:
+                cur = cur.with_motion(who, pre.motion)
+        sp, mask = _subproblem(cur, step, who)
+        res = solve(sp)
+        old = cur.character(who)
+        motion = res.motion
+        if mask is not None:  # write back only the window's control points
+            ctrl = np.array(old.motion.ctrl, float)
+            ctrl[mask] = np.asarray(res.motion.ctrl)[mask]
+            motion = Motion(ctrl, np.asarray(res.motion.warp, float))
+        free_flags = [f.free for f in old.footsteps]
+        steps = tuple(replace(f, free=fl) for f, fl in zip(res.footsteps, free_flags))
+        steps = _remap_footsteps(old.motion, motion, steps)
+        cur = cur.with_motion(who, motion, steps)
+        out["characters"][who] = {
+            "ctrl": np.asarray(motion.ctrl, float), "warp": np.asarray(motion.warp, float), "footsteps": steps,
+            "mask": mask, "status": res.status, "success": bool(res.success), "iterations": res.iterations,
+            "seconds": res.seconds + (pre_info["seconds"] if pre_info else 0.0), "energy": res.energy,
+            "violations": {k: float(v) for k, v in res.violations.items()}, "presolve": pre_info,
+            "contact_forces": res.contact_forces,
+        }
+    return out
+
+
+def _apply(scene: Scene, data: dict) -> Scene:
+    for who, d in data["characters"].items():
+        old = scene.character(who)
+        ctrl = np.asarray(d["ctrl"], float)
+        if d["mask"] is not None:  # merge: only the window's control points
+            merged = np.array(old.motion.ctrl, float)
+            merged[d["mask"]] = ctrl[d["mask"]]
+            ctrl = merged
+        scene = scene.with_motion(who, Motion(ctrl, np.asarray(d["warp"], float)), tuple(d["footsteps"]))
+    return scene
+
+
+def _record(index: int, step: Step, data: dict) -> StepRecord:
+    chars = data["characters"]
+    statuses = [c["status"] for c in chars.values()]
+    viol: dict = {}
+    for c in chars.values():
+        for k, v in c["violations"].items():
+            viol[k] = max(viol.get(k, 0.0), v)
+    pre = {w: c["presolve"] for w, c in chars.items() if c["presolve"]}
+    return StepRecord(index, step.id, step.kind, step.cycle, step.characters,
+                      statuses[0] if len(set(statuses)) == 1 else ";".join(statuses),
+                      all(c["success"] for c in chars.values()), sum(c["iterations"] for c in chars.values()),
+                      sum(c["seconds"] for c in chars.values()), float(sum(c["energy"] for c in chars.values())),
+                      viol, pre or None,
+                      {w: {k: c[k] for k in ("status", "iterations", "seconds", "energy")} for w, c in chars.items()})
+
+
+def _atomic_pickle(obj, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            pickle.dump(obj, fh, protocol=4)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _atomic_text(text: str, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def _fmt_s(s: float) -> str:
+    s = max(0.0, s)
+    return f"{int(s // 60)}m{int(s % 60):02d}s" if s >= 60 else f"{s:.0f}s"
+
+
+# --- the run --------------------------------------------------------------------------------
+
+def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> None:
+    """Create or check the run folder.  Without resume, old checkpoints are removed."""
+    man = run_dir / "manifest.json"
+    if resume and man.exists():
+        try:
+            old = json.loads(man.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise InputError(f"--resume: cannot read {man}: {exc}") from None
+        if old.get("fingerprint") != fingerprint:
+            raise InputError(f"--resume: the run folder {run_dir} belongs to a different scenario or schedule "
+                             f"(fingerprint {old.get('fingerprint')} != {fingerprint}); "
+                             "remove it or run without --resume")
+        return
+    steps = run_dir / "steps"
+    if steps.is_dir():
+        for p in steps.glob("*.pkl"):
+            p.unlink()
+    _atomic_text(json.dumps({"format": FORMAT, "fingerprint": fingerprint}, indent=1) + "\n", man)
+
+
+def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
+                 jobs: int = 1, resume: bool = False, log=sys.stderr) -> RunResult:
+    """Run every Step of ``schedule`` over ``scene``; see the module docstring."""
+    run_dir = Path(run_dir)
+    prepare_run_dir(run_dir, fingerprint, resume)
+    order = schedule.order()
+    index = {s.id: i for i, s in enumerate(order)}
+    first_of: dict[str, str] = {}
+    for s in order:
+        for who in s.characters:
+            first_of.setdefault(who, s.id)
+    n = len(order)
+    stop_after = int(os.environ.get("COMPOSE_STOP_AFTER", "0") or 0)
+    t_start = time.perf_counter()
+    records: dict[int, StepRecord] = {}
+    contact: dict = {}
+    solved_now = 0
+    resumed = 0
+    done = 0
+    solve_seconds = 0.0
+    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else None
+    try:
+        for gen in schedule.generations():
+            gen = sorted(gen, key=lambda s: index[s.id])
+            snapshot = scene
+            results: dict[str, dict] = {}
+            todo = []
+            for s in gen:
+                f = run_dir / "steps" / f"{index[s.id] + 1:03d}.pkl"
+                if resume and f.exists():
+                    with open(f, "rb") as fh:
+                        d = pickle.load(fh)
+                    if d.get("step") != s.id or d.get("fingerprint") != fingerprint:
+                        raise InputError(f"--resume: checkpoint {f} does not belong to step {s.id!r}")
+                    results[s.id] = d
+                    resumed += 1
+                    done += 1
+                    print(f"[{index[s.id] + 1}/{n}] {s.id}: resumed from {f}", file=log, flush=True)
+                else:
+                    todo.append(s)
+            pre = {s.id: tuple(w for w in s.characters if first_of[w] == s.id) for s in todo}
+            if pool is not None and len(todo) > 1:
+                futures = [(s, pool.submit(solve_step, snapshot, s, pre[s.id])) for s in todo]
+                pending = [(s, fu.result) for s, fu in futures]
+            else:
+                pending = [(s, (lambda s=s: solve_step(snapshot, s, pre[s.id]))) for s in todo]
+            for s, get in pending:
+                t0 = time.perf_counter()
+                d = get()
+                d["fingerprint"] = fingerprint
+                results[s.id] = d
+                rec = _record(index[s.id], s, d)
+                done += 1
+                solve_seconds += time.perf_counter() - t0
+                elapsed = time.perf_counter() - t_start
+                new_done = max(1, done - resumed)
+                eta = elapsed / new_done * (n - done)
+                print(f"[{index[s.id] + 1}/{n}] {s.id} (cycle {s.cycle}, {s.kind}): {rec.status}, "
+                      f"{rec.iterations} it, E={rec.energy:.4g}, {rec.seconds:.1f} s; "
+                      f"elapsed {_fmt_s(elapsed)}, ETA {_fmt_s(eta)}", file=log, flush=True)
+                bad = _hard_violations(rec.violations)
+                if not rec.success or bad:
+                    groups = ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items(), key=lambda kv: -kv[1])) \
+                        or "none above tolerance"
+                    raise StepFailed(f"step {s.id!r} failed: IPOPT status {rec.status} after {rec.iterations} "
+                                     f"iterations; violated constraint groups: {groups} "
+                                     f"(tolerance {VIOLATION_TOL:g}); finished steps are kept in {run_dir}")
+                _atomic_pickle(d, run_dir / "steps" / f"{index[s.id] + 1:03d}.pkl")
+                solved_now += 1
+                if stop_after and solved_now >= stop_after:
+                    print(f"compose: COMPOSE_STOP_AFTER={stop_after}: stopping after step {s.id!r}", file=log,
+                          flush=True)
+                    log.flush()
+                    os._exit(STOP_EXIT)
+            for s in gen:  # merge in the deterministic order
+                d = results[s.id]
+                scene = _apply(scene, d)
+                records[index[s.id]] = _record(index[s.id], s, d)
+                if s.kind == FULL:
+                    for who, c in d["characters"].items():
+                        contact[who] = c["contact_forces"]
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    return RunResult(scene, [records[i] for i in sorted(records)], time.perf_counter() - t_start, contact, resumed)
