@@ -476,7 +476,7 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
     steps = list(sp.footsteps)
     for j, si in enumerate(b.free_steps):
-        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
+        steps[si] = replace(steps[si], position=(float(np.ravel(F)[2 * j]), float(np.ravel(F)[2 * j + 1])))
     viol = violations(b, x)
     lam = x[b.lam_slice]
     V = friction_basis()
