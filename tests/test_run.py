@@ -1,0 +1,186 @@
+"""End-to-end tests of ``compose run``: scenario → schedule → executor → USD stage + report.
+
+The default run keeps one real end-to-end solve (the bundled ``walk``, about 45 s on two
+cores) plus cheap failure paths; everything longer is marked ``slow``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def compose(*args, cwd, env=None, timeout=1500):
+    e = dict(os.environ)
+    e.pop("COMPOSE_STOP_AFTER", None)
+    e.pop("COMPOSE_MAX_ITER", None)
+    e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")
+    e.update(env or {})
+    return subprocess.run([sys.executable, "-m", "schedules.cli", "run", *map(str, args)], cwd=cwd, env=e,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def final_motions(run_dir: Path) -> dict:
+    """{character: (ctrl, warp)} after the last checkpoint that touched each character."""
+    out = {}
+    for f in sorted((run_dir / "steps").glob("*.pkl")):
+        with open(f, "rb") as fh:
+            d = pickle.load(fh)
+        for who, c in d["characters"].items():
+            out[who] = (np.asarray(c["ctrl"]), np.asarray(c["warp"]))
+    return out
+
+
+def tracks_from_run(name: str, run_dir: Path, fps: float):
+    from scenarios.loader import load_scenario
+    from scenegraph.motion import Motion
+    from scenegraph.scene import build_scene
+    from scenegraph.usd_export import CharacterTrack
+
+    scene = build_scene(load_scenario(name))
+    tracks = []
+    for who, (ctrl, warp) in final_motions(run_dir).items():
+        times, q = Motion(ctrl, warp).sample(fps)
+        tracks.append(CharacterTrack(who, scene.character(who).character, np.asarray(q), float(times[0])))
+    return tracks
+
+
+@pytest.fixture(scope="module")
+def walk_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("walk")
+    (d / "tmp").mkdir()
+    res = compose("walk", "-o", "tmp/walk.usda", "--report", "tmp/r.json", "--run-dir", "run", cwd=d)
+    return d, res
+
+
+def test_walk_end_to_end(walk_run):
+    from scenegraph.usd_export import readback_errors
+
+    d, res = walk_run
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "[1/2] walker/c1/whole/timing" in res.stderr and "[2/2] walker/c1/whole/full" in res.stderr
+    assert "ETA" in res.stderr
+    stage = d / "tmp" / "walk.usda"
+    assert stage.is_file()
+    dp, dr, n = readback_errors(stage, tracks_from_run("walk", d / "run", 30.0), 30.0)
+    assert n >= 30 and dp <= 1e-5 and dr <= 1e-4
+    rep = json.loads((d / "tmp" / "r.json").read_text())
+    assert rep["scenario"] == "walk"
+    assert [s["id"] for s in rep["steps"]] == ["walker/c1/whole/timing", "walker/c1/whole/full"]
+    for s in rep["steps"]:
+        assert s["success"] and s["iterations"] > 0 and s["seconds"] > 0 and np.isfinite(s["energy"])
+    audit = rep["characters"]["walker"]["audit"]
+    for k in ("root_residual_rms", "footstep_error_max", "penetration_max", "friction_violation_max",
+              "foot_sliding_max", "joint_limit_violation_max", "energy"):
+        assert k in audit
+    assert audit["root_residual_rel"] < 0.05
+    g = rep["goals"]["footprints_0"]
+    assert set(g) >= {"holds", "measured", "tolerance"} and g["holds"]
+    assert rep["total_seconds"] > 0 and rep["versions"]["casadi"]
+    # the stage carries provenance
+    text = stage.read_text()
+    assert "walker" in text and "energies" in text
+
+
+def test_bad_scenario_exits_2_and_writes_nothing(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\nduration: -1\ncharacters: []\n")
+    res = compose(bad, "-o", "out.usda", "--report", "r.json", cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert "bad.yaml" in res.stderr
+    assert not (tmp_path / "out.usda").exists() and not (tmp_path / "r.json").exists()
+    assert not (tmp_path / "runs").exists()
+
+
+def test_bad_output_extension_exits_2(tmp_path):
+    res = compose("walk", "-o", "out.obj", cwd=tmp_path)
+    assert res.returncode == 2 and ".usda" in res.stderr
+    assert not list(tmp_path.iterdir())
+
+
+def test_failing_step_exits_1_names_step_and_constraints(tmp_path):
+    res = compose("walk", "-o", "out.usda", "--report", "r.json", "--run-dir", "run", cwd=tmp_path,
+                  env={"COMPOSE_MAX_ITER": "1"})
+    assert res.returncode == 1, res.stderr[-3000:]
+    assert "walker/c1/whole/timing" in res.stderr and "violated constraint groups" in res.stderr
+    assert "footstep" in res.stderr or "penetration" in res.stderr
+    assert not (tmp_path / "out.usda").exists() and not (tmp_path / "r.json").exists()
+    assert (tmp_path / "run" / "manifest.json").exists()  # the run folder (last good state) is kept
+
+
+@pytest.mark.slow
+def test_resume_after_kill_gives_the_same_result(walk_run, tmp_path):
+    d, full = walk_run
+    assert full.returncode == 0
+    res = compose("walk", "-o", "w.usda", "--run-dir", "run", cwd=tmp_path, env={"COMPOSE_STOP_AFTER": "1"})
+    assert res.returncode == 75, res.stderr[-3000:]
+    assert not (tmp_path / "w.usda").exists()
+    assert len(list((tmp_path / "run" / "steps").glob("*.pkl"))) == 1
+    res = compose("walk", "-o", "w.usda", "--run-dir", "run", "--resume", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "resumed" in res.stderr
+    a, b = final_motions(d / "run"), final_motions(tmp_path / "run")
+    for who in a:
+        np.testing.assert_array_equal(a[who][0], b[who][0])
+        np.testing.assert_array_equal(a[who][1], b[who][1])
+
+
+@pytest.mark.slow
+def test_resume_rejects_a_foreign_run_folder(walk_run, tmp_path):
+    d, full = walk_run
+    res = compose("walk_to", "-o", "x.usda", "--run-dir", d / "run", "--resume", cwd=tmp_path)
+    assert res.returncode == 2 and "different scenario" in res.stderr
+
+
+@pytest.mark.slow
+def test_two_walkers_jobs_2_equals_jobs_1(tmp_path):
+    r1 = compose("two_walkers", "-o", "a.usda", "--report", "a.json", "--run-dir", "r1", "--jobs", "1", cwd=tmp_path)
+    assert r1.returncode == 0, r1.stderr[-3000:]
+    r2 = compose("two_walkers", "-o", "b.usda", "--report", "b.json", "--run-dir", "r2", "--jobs", "2", cwd=tmp_path)
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    a, b = final_motions(tmp_path / "r1"), final_motions(tmp_path / "r2")
+    assert set(a) == {"alice", "bob"} == set(b)
+    for who in a:
+        np.testing.assert_array_equal(a[who][0], b[who][0])
+        np.testing.assert_array_equal(a[who][1], b[who][1])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["walk_to", "two_walkers", "walk_to_run"])
+def test_bundled_scenarios_run_end_to_end(name, tmp_path):
+    from scenegraph.usd_export import readback_errors
+
+    res = compose(name, "-o", f"{name}.usda", "--report", "r.json", "--run-dir", "run", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr[-3000:]
+    dp, dr, n = readback_errors(tmp_path / f"{name}.usda", tracks_from_run(name, tmp_path / "run", 30.0), 30.0)
+    assert n > 0 and dp <= 1e-5 and dr <= 1e-4
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert all(s["success"] for s in rep["steps"])
+    for who, c in rep["characters"].items():
+        assert c["audit"]["root_residual_rel"] < 0.05, who
+
+
+def test_scene_units_and_edits():
+    """Scenario degrees become radians; body edits reach the character; walk_to footsteps are free."""
+    import math
+
+    from scenarios.loader import load_scenario
+    from scenegraph.scene import build_scene, walk_footsteps
+
+    scene = build_scene(load_scenario("tackle"))
+    assert scene.character("dodger").start[2] == pytest.approx(math.pi / 2)
+    steps = scene.character("dodger").footsteps
+    assert steps and all(f.free for f in steps)
+    assert all(abs(f.heading - math.pi / 2) < 1e-9 for f in steps)
+    fs = walk_footsteps((0, 0), (1.5, 0), 0.0, 1.4)
+    assert fs[0].t0 == 0.0 and fs[-1].t1 == pytest.approx(1.4)
+    assert [f.foot for f in fs] == ["r", "l", "r", "l"][:len(fs)]
+    assert all(f.free for f in fs)
