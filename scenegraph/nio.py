@@ -1,0 +1,441 @@
+"""Nonlinear Inverse Optimization (NIO, paper §6): learn a physical style θ from one motion.
+
+Given an observed motion X_T with its footsteps C, NIO looks for the style under which X_T
+is the energy-optimal motion (Eq. 16).  It minimises (Eq. 17–19)
+
+    G(θ) + D(θ),   G(θ) = E(X_T; θ) − min_{X ∈ C} E(X; θ),
+    D(θ) = w (Σ_j α_j − 1)² + w Σ_j min(α_j, 0)²,   w = 10⁴,
+
+with the energy of the spacetime solver (Eq. 13, same collocation grid and normalisation):
+
+    E(X; θ) = (OBJ_SCALE / m g)² Σ_k w_k T'_k [ Σ_j α_j Q_mj(s_k)² + w_r Σ_i Q_0i(s_k)² ].
+
+Contact forces are part of a motion; for a *fixed* q the energy is minimised over the
+contact coefficients λ ≥ 0 point by point (a non-negative least-squares problem, because
+the residuals are affine in the contact forces).  That is how X_T gets its forces, and it
+is also applied to every counterexample, so E(X_T; θ) and E(X_S; θ) are measured alike.
+
+One iteration (paper §6.1): the counterexample X_S = argmin E(X; θ̂) by the spacetime solver
+warm-started at X_T — or at the previous counterexample when that is already better
+under the new θ (a limited number of IPOPT iterations: X_S need only be better than X_T; X_S
+is the lowest-energy motion among X_T, the previous counterexample and the solve, so G never
+reads 0 just because IPOPT stopped early); the approximate gradient
+(Eq. 21) ∂E(X_T; θ)/∂θ − ∂E(X_S; θ)/∂θ + ∂D/∂θ by automatic differentiation (CasADi) of
+the residual kernel with the motions and forces held fixed; the halving line search of
+footnote 3 on G + D.  Every trial θ costs one spacetime solve, and the counterexample of the
+accepted trial is the counterexample of the next iteration.
+
+The search direction is the gradient preconditioned by a diagonal of typical magnitudes
+(α ~ 1/M, springs ~ their default stiffness, q̄ ~ 0.1 rad, …) and scaled so that β = 1 moves
+the most-affected parameter by ``trust`` typical magnitudes; ``trust`` follows the accepted
+β (doubling after a full step).  Stiffnesses, dampers and the shoe are kept ≥ 0 by
+projection, q̄ and h̄ within the Style bounds; α is constrained only softly by D, and the
+returned style has α normalised to sum to 1.
+
+Stop: when the relative decrease of G + D stays below ``rtol`` for ``patience`` iterations,
+when G is below ``g_abs`` × its initial value, when the line search cannot decrease G + D,
+or after ``max_iter`` iterations (a safety net, reported as such).
+"""
+from __future__ import annotations
+
+import functools
+import time as _time
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import nnls
+
+from .body import G, JOINT_DOF_NAMES, N_DOF, N_JOINT, N_ROOT, Character
+from .dynamics import friction_basis
+from .footsteps import Footstep
+from .motion import Motion
+from .spacetime import (FORCE_HANDLES, OBJ_SCALE, W_ROOT, Built, Result, Subproblem, build,
+                        residual_kernel, solve)
+from .style import Provenance, Style, default_style
+
+__all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style", "joint_rms_deg",
+           "D_WEIGHT", "N_THETA_FULL"]
+
+D_WEIGHT = 1.0e4  # paper: w in Eq. 18
+N_THETA_FULL = 5 * N_JOINT + 2  # 147
+LAM_REG = 1e-3  # the solver's λ regularisation (kept for a well-posed contact split)
+
+
+def joint_rms_deg(a: Motion, b: Motion, fps: float = 30.0) -> float:
+    """RMS (degrees) of the joint angles (root excluded) of ``a`` vs ``b`` at ``fps`` frames
+    over their common time span."""
+    t0, t1 = max(a.start, b.start), min(a.end, b.end)
+    n = int(np.floor((t1 - t0) * fps + 1e-9)) + 1
+    t = t0 + np.arange(n) / fps
+    qa = a.canonical(a.to_canonical(t))[:, N_ROOT:]
+    qb = b.canonical(b.to_canonical(t))[:, N_ROOT:]
+    return float(np.degrees(np.sqrt(np.mean((qa - qb) ** 2))))
+
+
+def _theta_scales(style: Style) -> np.ndarray:
+    """Typical magnitude of every θ component (the diagonal preconditioner)."""
+    ref = default_style()
+    ks = np.maximum(np.maximum(ref.ks1, np.asarray(style.ks1)), 1.0)
+    return np.concatenate([np.full(N_JOINT, 1.0 / N_JOINT), ks, ks, 0.1 * ks, np.full(N_JOINT, 0.1),
+                           [max(ref.k_shoe, style.k_shoe)], [0.005]])
+
+
+def _project(th: np.ndarray) -> np.ndarray:
+    """Bounds of a Style except α (soft constraints D)."""
+    th = th.copy()
+    M = N_JOINT
+    th[M:4 * M] = np.clip(th[M:4 * M], 0.0, 1e5)
+    th[4 * M:5 * M] = np.clip(th[4 * M:5 * M], -np.pi, np.pi)
+    th[-2] = float(np.clip(th[-2], 0.0, 1e7))
+    th[-1] = float(np.clip(th[-1], 0.0, 0.1))
+    return th
+
+
+def style_from_theta(th: np.ndarray, name: str = "learned", provenance: Provenance | None = None) -> Style:
+    """A valid Style from θ: α clipped at 0 and normalised, everything else projected."""
+    th = _project(np.asarray(th, float))
+    a = np.maximum(th[:N_JOINT], 0.0)
+    a = a / a.sum() if a.sum() > 0 else np.full(N_JOINT, 1.0 / N_JOINT)
+    th[:N_JOINT] = a
+    return Style.from_vector(th, name=name, provenance=provenance)
+
+
+def d_penalty(th: np.ndarray) -> tuple[float, np.ndarray]:
+    """D(θ) (Eq. 18) and its gradient."""
+    a = th[:N_JOINT]
+    s = a.sum() - 1.0
+    neg = np.minimum(a, 0.0)
+    g = np.zeros_like(th)
+    g[:N_JOINT] = D_WEIGHT * (2 * s + 2 * neg)
+    return float(D_WEIGHT * (s ** 2 + np.sum(neg ** 2))), g
+
+
+@functools.lru_cache(maxsize=4)
+def _force_jacobian(ch: Character) -> ca.Function:
+    k = residual_kernel(ch)
+    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
+    f = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
+    th = ca.SX.sym("th", k.size1_in(4))
+    Q = k(q, qd, qdd, f, th)
+    return ca.Function("dQdf", [q, qd, qdd, f, th], [Q, ca.jacobian(Q, f)])
+
+
+@dataclass
+class IterationRecord:
+    iteration: int
+    G: float
+    D: float
+    E_target: float
+    E_counter: float
+    beta: float
+    evaluations: int
+    seconds: float
+
+
+@dataclass
+class NIOResult:
+    style: Style  # α normalised
+    theta: np.ndarray  # raw θ (147) at the end
+    history: list[IterationRecord]
+    g_initial: float
+    g_final: float
+    iterations: int
+    evaluations: int
+    seconds: float
+    stop_reason: str
+    counterexample: Motion | None = None
+
+
+@dataclass
+class _Eval:
+    theta: np.ndarray
+    G: float
+    D: float
+    E_T: float
+    E_S: float
+    grad: np.ndarray  # dG̃/dθ + dD/dθ
+    motion_S: Motion
+    FS: np.ndarray
+    solve: Result | None
+
+
+class NIO:
+    """An NIO problem for one target motion (fixed footsteps and timing).
+
+    ``target``: the observed motion X_T (a Motion on the character); ``footsteps`` its
+    footstep constraints C.  ``solve_iter``: IPOPT iterations per counterexample.
+    """
+
+    def __init__(self, ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *,
+                 solve_iter: int = 60, collocation_hz: float = 30.0, tol: float = 1e-4):
+        self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
+        self.sp = Subproblem(ch, default_style(ch.total_mass), target, self.footsteps, free=frozenset({"q"}),
+                             collocation_hz=collocation_hz, max_iter=solve_iter, tol=tol, label="nio")
+        t = _time.perf_counter()
+        self.built: Built = build(self.sp)
+        self.build_seconds = _time.perf_counter() - t
+        b = self.built
+        s = b.s_points
+        self.N = N = len(s)
+        wq = np.zeros(N)
+        wq[1:] += np.diff(s) / 2
+        wq[:-1] += np.diff(s) / 2
+        self.mg = ch.total_mass * G
+        T1 = target.time(s, 1)  # warp is fixed (free = q): the same for every counterexample
+        self.wT = wq * T1
+        self.c = self.wT * (OBJ_SCALE / self.mg) ** 2
+        # contact structure: per point the planted handles and their λ slices
+        self.planted: list[list[tuple[int, slice]]] = [[] for _ in range(N)]
+        for h, k, sl in b.contact_index:
+            self.planted[k].append((FORCE_HANDLES.index(h), sl))
+        self.V = friction_basis()
+        self._energy_fn = self._make_energy_fn()
+        self.n_solves = 0
+        self.solve_seconds = 0.0
+
+    # --- energy ---------------------------------------------------------------------------
+    def _make_energy_fn(self) -> ca.Function:
+        N = self.N
+        th = ca.MX.sym("theta", N_THETA_FULL)
+        q, qd, qdd = (ca.MX.sym(n, N_DOF, N) for n in ("q", "qd", "qdd"))
+        F = ca.MX.sym("F", 3 * len(FORCE_HANDLES), N)
+        alpha = th[:N_JOINT]
+        thk = th[N_JOINT:]
+        QQ = residual_kernel(self.ch).map(N)(q, qd, qdd, F, ca.repmat(thk, 1, N))
+        per = ca.mtimes(alpha.T, QQ[:N_JOINT, :] ** 2) + W_ROOT * ca.sum1(QQ[N_JOINT:, :] ** 2)
+        E = ca.mtimes(per, ca.DM(self.c))
+        return ca.Function("nio_E", [th, q, qd, qdd, F], [E, ca.gradient(E, th)])
+
+    def states(self, motion: Motion):
+        q, qd, qdd = motion.state_at_s(self.built.s_points)
+        return q.T, qd.T, qdd.T
+
+    def forces(self, motion: Motion, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Contact forces (24, N) minimising E for the fixed q of ``motion`` (NNLS per point),
+        and λ in the solver's layout."""
+        q, qd, qdd = self.states(motion)
+        fn = _force_jacobian(self.ch).map(self.N)
+        nf = 3 * len(FORCE_HANDLES)
+        thk = np.tile(theta[N_JOINT:, None], (1, self.N))
+        Q0, J = fn(q, qd, qdd, np.zeros((nf, self.N)), thk)
+        Q0, J = np.asarray(Q0), np.asarray(J)  # J: (35, 24 N)
+        wsq = np.sqrt(np.r_[np.maximum(theta[:N_JOINT], 0.0), np.full(N_ROOT, W_ROOT)])
+        F = np.zeros((nf, self.N))
+        lam = np.zeros(self.built.lam_slice.stop - self.built.lam_slice.start)
+        off = self.built.lam_slice.start
+        for k, pl in enumerate(self.planted):
+            if not pl:
+                continue
+            Jk = J[:, k * nf:(k + 1) * nf]
+            A = np.hstack([Jk[:, 3 * i:3 * i + 3] @ (self.mg * self.V) for i, _ in pl])
+            reg = LAM_REG * self.mg / np.sqrt(max(self.wT[k], 1e-12))
+            AA = np.vstack([wsq[:, None] * A, reg * np.eye(A.shape[1])])
+            bb = np.r_[-wsq * Q0[:, k], np.zeros(A.shape[1])]
+            x, _ = nnls(AA, bb, maxiter=50 * A.shape[1])
+            for c, (i, sl) in enumerate(pl):
+                lk = x[4 * c:4 * c + 4]
+                F[3 * i:3 * i + 3, k] += self.mg * self.V @ lk
+                lam[sl.start - off:sl.stop - off] = lk
+        return F, lam
+
+    def energy(self, theta: np.ndarray, motion: Motion, F: np.ndarray) -> tuple[float, np.ndarray]:
+        E, g = self._energy_fn(theta, *self.states(motion), F)
+        return float(E), np.asarray(g).ravel()
+
+    # --- counterexample -------------------------------------------------------------------
+    def counterexample(self, theta: np.ndarray, start: Motion | None = None,
+                       lam0: np.ndarray | None = None) -> Result:
+        """X_S: the spacetime solve for style θ warm-started at ``start`` (default X_T)."""
+        b = self.built
+        N = self.N
+        nK = b.p.shape[0] - (N_THETA_FULL - N_JOINT) * N - N_JOINT * N
+        TH = np.tile(theta[N_JOINT:, None], (1, N))
+        SA = np.tile(np.sqrt(np.maximum(theta[:N_JOINT], 0.0))[:, None], (1, N))
+        p = np.concatenate([b.p[:nK], TH.ravel(order="F"), SA.ravel(order="F")])
+        x0 = b.x0.copy()
+        if start is not None:
+            nq = start.ctrl.size
+            x0[:nq] = np.asarray(start.ctrl, float).ravel()
+        if lam0 is not None:
+            x0[b.lam_slice] = lam0
+        t = _time.perf_counter()
+        res = solve(self.sp, replace(b, p=p, x0=x0))
+        self.solve_seconds += _time.perf_counter() - t
+        self.n_solves += 1
+        return res
+
+    def evaluate(self, theta: np.ndarray, candidates: tuple[Motion, ...] = ()) -> _Eval:
+        """G(θ), D(θ) and the approximate gradient (Eq. 21) of G + D.
+
+        ``candidates`` (earlier counterexamples) are motions that also satisfy C: the solve
+        starts from the best of X_T and them, and X_S is the best motion seen, so G is an
+        honest lower bound of Eq. 17 even when IPOPT stops early or wanders off.
+        """
+        theta = np.asarray(theta, float)
+        FT, lamT = self.forces(self.target, theta)
+        ET, gT = self.energy(theta, self.target, FT)
+        best = (ET, gT, self.target, FT, lamT)
+        for m in candidates:
+            F, lam = self.forces(m, theta)
+            E, g = self.energy(theta, m, F)
+            if np.isfinite(E) and E < best[0]:
+                best = (E, g, m, F, lam)
+        res = self.counterexample(theta, best[2], best[4])
+        XS = res.motion
+        FS, lamS = self.forces(XS, theta)
+        ES, gS = self.energy(theta, XS, FS)
+        if np.isfinite(ES) and ES < best[0]:
+            best = (ES, gS, XS, FS, lamS)
+        ES, gS, XS, FS, _ = best
+        D, gD = d_penalty(theta)
+        return _Eval(theta, ET - ES, D, ET, ES, gT - gS + gD, XS, FS, res)
+
+    # --- the learning loop ----------------------------------------------------------------
+    def run(self, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 2,
+            g_abs: float = 1e-4, trust: float = 0.1, min_beta: float = 1e-6,
+            callback: Callable[[IterationRecord], None] | None = None) -> NIOResult:
+        t_start = _time.perf_counter()
+        scales = _theta_scales(style_from_theta(theta0))
+        cur = self.evaluate(_project(np.asarray(theta0, float)))
+        n_eval = 1
+        hist = [IterationRecord(0, cur.G, cur.D, cur.E_T, cur.E_S, 0.0, 1, _time.perf_counter() - t_start)]
+        if callback:
+            callback(hist[-1])
+        g0 = cur.G + cur.D
+        slow, reason, it = 0, "max_iter", 0
+        cache: dict[float, _Eval] = {}
+        for it in range(1, max_iter + 1):
+            if cur.G + cur.D <= g_abs * max(g0, 1e-300):
+                reason = "G below tolerance"
+                it -= 1
+                break
+            d = scales ** 2 * cur.grad  # preconditioned gradient
+            nrm = np.max(np.abs(d / scales))
+            if not np.isfinite(nrm) or nrm == 0:
+                reason = "zero gradient"
+                it -= 1
+                break
+            delta = d * (trust / nrm)
+            cache = {}
+
+            def at(beta):
+                if beta not in cache:
+                    cache[beta] = self.evaluate(_project(cur.theta - beta * delta), (cur.motion_S,))
+                return cache[beta]
+
+            beta = 1.0  # footnote 3
+            while beta > min_beta and at(beta).G + at(beta).D > at(beta / 2).G + at(beta / 2).D:
+                beta /= 2
+            new = at(beta)
+            n_eval += len(cache)
+            prev = cur.G + cur.D
+            if new.G + new.D >= prev:
+                # no decrease along this direction: try shorter steps once, then stop
+                trust *= 0.25
+                rec = IterationRecord(it, cur.G, cur.D, cur.E_T, cur.E_S, 0.0, len(cache),
+                                      _time.perf_counter() - t_start)
+                hist.append(rec)
+                if callback:
+                    callback(rec)
+                if trust < 1e-3:
+                    reason = "line search found no decrease"
+                    break
+                slow += 1
+                if slow >= patience + 1:
+                    reason = "line search found no decrease"
+                    break
+                continue
+            cur = new
+            trust = min(4.0, trust * (2.0 if beta == 1.0 else max(beta, 1e-3) * 2))
+            rec = IterationRecord(it, cur.G, cur.D, cur.E_T, cur.E_S, beta, len(cache),
+                                  _time.perf_counter() - t_start)
+            hist.append(rec)
+            if callback:
+                callback(rec)
+            rel = (prev - (cur.G + cur.D)) / max(prev, 1e-300)
+            slow = slow + 1 if rel < rtol else 0
+            if slow >= patience:
+                reason = f"relative decrease < {rtol} for {patience} iterations"
+                break
+        return NIOResult(style_from_theta(cur.theta), cur.theta, hist, hist[0].G, cur.G,
+                         sum(1 for h in hist[1:] if h.beta > 0), n_eval, _time.perf_counter() - t_start,
+                         reason, cur.motion_S)
+
+    # --- initialisation (§6.1) ------------------------------------------------------------
+    def initial_theta(self, base: Style | None = None, rest_from_target: bool = True,
+                      springs_from_target: bool = True) -> np.ndarray:
+        """α = 1/M, q̄ = mean pose of X_T, springs by Eq. 22 (least squares of the inferred
+        muscle forces, stiffnesses ≥ 0); shoe from ``base``."""
+        base = base or default_style(self.ch.total_mass)
+        th = base.vector().copy()
+        th[:N_JOINT] = 1.0 / N_JOINT
+        M = N_JOINT
+        q, qd, _ = self.states(self.target)
+        if rest_from_target:
+            th[4 * M:5 * M] = np.clip(q[N_ROOT:, :] @ (self.wT / self.wT.sum()), -np.pi, np.pi)
+        if springs_from_target:
+            th = self._fit_springs(th)
+        return _project(th)
+
+    def _fit_springs(self, th: np.ndarray) -> np.ndarray:
+        """Eq. 22: per joint DOF, min Σ_t Q_mj² over (ks1, ks2, kd) ≥ 0.  Q_mj is affine in its
+        own DOF's spring and damper (generalized passive forces act on their DOF only), so
+        each DOF is a 3-unknown NNLS; contact forces are re-inferred once with the springs."""
+        M = N_JOINT
+        q, qd, qdd = self.states(self.target)
+        for _ in range(2):
+            F, _ = self.forces(self.target, th)
+            th0 = th.copy()
+            th0[M:4 * M] = 0.0
+            Q0 = np.asarray(residual_kernel(self.ch).map(self.N)(q, qd, qdd, F,
+                                                                 np.tile(th0[M:, None], (1, self.N))))
+            # passive generalized force is linear in (ks1, ks2, kd): get its columns by probing
+            cols = []
+            for blk in range(3):
+                thp = th0.copy()
+                thp[(1 + blk) * M:(2 + blk) * M] = 1.0
+                Qp = np.asarray(residual_kernel(self.ch).map(self.N)(q, qd, qdd, F,
+                                                                     np.tile(thp[M:, None], (1, self.N))))
+                cols.append(Qp[:M] - Q0[:M])
+            w = np.sqrt(self.wT)
+            for j in range(M):
+                A = np.stack([c[j] * w for c in cols], axis=1)
+                b = -Q0[j] * w
+                # a small ridge keeps unobservable springs near zero
+                ridge = 1e-3 * np.linalg.norm(A) + 1e-9
+                x, _ = nnls(np.vstack([A, ridge * np.eye(3)]), np.r_[b, np.zeros(3)])
+                th[M + j], th[2 * M + j], th[3 * M + j] = x
+        return th
+
+
+def initial_style(ch: Character, target: Motion, footsteps, **kw) -> Style:
+    nio = NIO(ch, target, footsteps, **kw)
+    return style_from_theta(nio.initial_theta(), name="nio-initial")
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+    out = {}
+    for pkg in ("compose-motion", "casadi", "numpy"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "src" if pkg == "compose-motion" else "unknown"
+    return out
+
+
+def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *, init: Style | str = "paper",
+                name: str = "learned", clip: str | None = None, frames: str | None = None,
+                body: str | None = None, callback=None, solve_iter: int = 60, **run_kw) -> NIOResult:
+    """Learn a style from ``target``.  ``init``: "paper" (α = 1/M, q̄ = mean pose, springs by
+    Eq. 22) or a Style to start from.  The returned style carries its provenance."""
+    nio = NIO(ch, target, footsteps, solve_iter=solve_iter)
+    th0 = nio.initial_theta() if isinstance(init, str) else init.vector().copy()
+    out = nio.run(th0, callback=callback, **run_kw)
+    prov = Provenance(clip=clip, frames=frames, body=body or ch.preset, versions=_versions(), g_final=float(out.g_final),
+                      g_initial=float(out.g_initial), iterations=out.iterations, stop=out.stop_reason)
+    out.style = style_from_theta(out.theta, name=name, provenance=prov)
+    out.nio = nio  # type: ignore[attr-defined]
+    return out
