@@ -218,7 +218,7 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...]) -> dict:
             "mask": mask, "status": res.status, "success": bool(res.success), "iterations": res.iterations,
             "seconds": res.seconds + (pre_info["seconds"] if pre_info else 0.0), "energy": res.energy,
             "violations": {k: float(v) for k, v in res.violations.items()}, "presolve": pre_info,
-            "contact_forces": res.contact_forces,
+            "contact_forces": res.contact_forces, "window": sp.window,
         }
     return out
 
@@ -233,6 +233,27 @@ def _apply(scene: Scene, data: dict) -> Scene:
             ctrl = merged
         scene = scene.with_motion(who, Motion(ctrl, np.asarray(d["warp"], float)), tuple(d["footsteps"]))
     return scene
+
+
+def _merge_contacts(old: dict | None, new: dict, window) -> dict:
+    """Contact forces of a windowed step replace the old ones inside its window only."""
+    if window is None or not old:
+        return new
+    out = {}
+    for h in sorted(set(old) | set(new)):
+        ts, fs = [], []
+        if h in old:
+            t, f = old[h]
+            keep = (t < window[0] - 1e-9) | (t > window[1] + 1e-9)
+            ts.append(t[keep])
+            fs.append(np.asarray(f).reshape(-1, 3)[keep])
+        if h in new:
+            ts.append(new[h][0])
+            fs.append(np.asarray(new[h][1]).reshape(-1, 3))
+        t, f = np.concatenate(ts), np.concatenate(fs)
+        o = np.argsort(t, kind="stable")
+        out[h] = (t[o], f[o])
+    return out
 
 
 def _record(index: int, step: Step, data: dict) -> StepRecord:
@@ -381,7 +402,7 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                 records[index[s.id]] = _record(index[s.id], s, d)
                 if s.kind == FULL:
                     for who, c in d["characters"].items():
-                        contact[who] = c["contact_forces"]
+                        contact[who] = _merge_contacts(contact.get(who), c["contact_forces"], c.get("window"))
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
