@@ -1,0 +1,125 @@
+"""``compose learn CLIP.bvh --frames A:B [--body PRESET] -o STYLE.yaml``: learn a style by NIO."""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from scenarios.errors import ComposeError, InputError
+
+__all__ = ["register", "parse_frames", "clip_target", "learn_from_bvh"]
+
+
+def parse_frames(text: str) -> tuple[int, int]:
+    """"A:B" → (A, B): source frames of the BVH file, B exclusive (Python slice style)."""
+    try:
+        a, b = (int(x) for x in str(text).split(":"))
+    except ValueError:
+        raise InputError(f"--frames must look like A:B (two integers), got {text!r}") from None
+    if a < 0 or b <= a + 1:
+        raise InputError(f"--frames {text}: need 0 <= A and at least 2 frames (B > A + 1)")
+    return a, b
+
+
+def _to_spacetime_steps(ch, steps, t0: float, t1: float):
+    """Clip footsteps (scenegraph.contacts) → spacetime Footsteps with heel/ball phases."""
+    from scenegraph.footsteps import Footstep
+
+    foot_len = ch.handle("ball_l").point[0] - ch.handle("heel_l").point[0]
+    out = []
+    for st in steps:
+        a, b = max(st.start, t0), min(st.end, t1)
+        if b - a < 0.05:
+            continue
+        by = {c.handle: c for c in st.contacts}
+        d = np.array([np.cos(st.heading), np.sin(st.heading)])
+        if "ball" in by:
+            pos = np.array(by["ball"].position[:2])
+        elif "heel" in by:
+            pos = np.array(by["heel"].position[:2]) + foot_len * d
+        else:
+            pos = np.array(st.position[:2])
+        span = b - a
+
+        def frac(c):
+            if c is None:
+                return None
+            fa = float(np.clip((c.start - a) / span, 0.0, 1.0))
+            fb = float(np.clip((c.end - a) / span, 0.0, 1.0))
+            return (fa, fb) if fb - fa > 0.05 else None
+
+        heel, ball = frac(by.get("heel")), frac(by.get("ball") or by.get("toe"))
+        if heel is None and ball is None:
+            ball = (0.0, 1.0)
+        out.append(Footstep(st.side, (float(pos[0]), float(pos[1])), float(a), float(b), float(st.heading),
+                            heel=heel, ball=ball))
+    return tuple(sorted(out, key=lambda f: f.t0))
+
+
+def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz: float = 10.0):
+    """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B)."""
+    from scenegraph.contacts import detect_footsteps
+    from scenegraph.mocap import load_clip
+    from scenegraph.motion import Motion
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"no such clip file: {path}")
+    clip = load_clip(p, frames=frames, preset=body)
+    times = np.asarray(clip.times, float)
+    motion = Motion.from_samples(times, np.asarray(clip.q, float),
+                                 n_ctrl=max(6, int(round((times[-1] - times[0]) * ctrl_hz)) + 3))
+    steps = _to_spacetime_steps(clip.character, detect_footsteps(clip), times[0], times[-1])
+    if not steps:
+        raise InputError(f"{path} frames {frames[0]}:{frames[1]}: no foot contacts detected")
+    return clip.character, motion, steps, clip
+
+
+def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=None, name=None,
+                   progress=None, **run_kw):
+    from scenegraph.nio import learn_style
+    from scenegraph.style import save_style
+
+    ch, motion, steps, clip = clip_target(path, frames, body)
+    res = learn_style(ch, motion, steps, name=name or Path(out or path).stem, clip=Path(path).name,
+                      frames=f"{frames[0]}:{frames[1]}", body=body, callback=progress, **run_kw)
+    if out is not None:
+        save_style(res.style, out, header=f"learned by: compose learn {Path(path).name} "
+                                          f"--frames {frames[0]}:{frames[1]} --body {body}")
+    return res, (ch, motion, steps, clip)
+
+
+def _cmd_learn(args) -> int:
+    frames = parse_frames(args.frames)
+    t0 = time.perf_counter()
+
+    def progress(rec):
+        print(f"  iter {rec.iteration:3d}  G = {rec.G:.6g}  D = {rec.D:.3g}  "
+              f"E(X_T) = {rec.E_target:.6g}  E(X_S) = {rec.E_counter:.6g}  beta = {rec.beta:g}  "
+              f"[{rec.seconds:.0f} s]", file=sys.stderr, flush=True)
+
+    print(f"compose learn: {args.clip} frames {args.frames} body {args.body}", file=sys.stderr, flush=True)
+    try:
+        res, _ = learn_from_bvh(args.clip, frames, args.body, args.output, progress=progress,
+                                max_iter=args.max_iter)
+    except ComposeError:
+        raise
+    except (ValueError, OSError) as exc:
+        raise InputError(f"{args.clip}: {exc}") from None
+    print(f"compose learn: G {res.g_initial:.6g} -> {res.g_final:.6g} in {res.iterations} iterations "
+          f"({res.stop_reason}), {time.perf_counter() - t0:.0f} s; wrote {args.output}", file=sys.stderr)
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("learn", help="learn a physical style from a BVH clip (Nonlinear Inverse Optimization)",
+                       description="Learn a physical style θ from frames A:B (B exclusive) of a BVH clip "
+                                   "and write it as a style YAML file with its provenance.")
+    p.add_argument("clip", metavar="CLIP.bvh")
+    p.add_argument("--frames", required=True, metavar="A:B", help="source frames A to B (exclusive)")
+    p.add_argument("--body", default="adult_male", metavar="PRESET", help="body preset (default adult_male)")
+    p.add_argument("-o", "--output", required=True, metavar="STYLE.yaml")
+    p.add_argument("--max-iter", type=int, default=30, help="safety limit on NIO iterations (default 30)")
+    p.set_defaults(func=_cmd_learn)
