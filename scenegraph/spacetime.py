@@ -473,6 +473,7 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     stats = b.solver.stats()
     x = np.asarray(sol["x"]).ravel()
     P, W, F, E, E0 = (np.asarray(v) for v in b.unpack(x, b.p))
+    F = F.ravel()
     motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
     steps = list(sp.footsteps)
     for j, si in enumerate(b.free_steps):
