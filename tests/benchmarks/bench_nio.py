@@ -1,0 +1,65 @@
+"""Benchmark: learn the walk style from one gait cycle of CMU 07_01 by NIO, then re-synthesise.
+
+    python tests/benchmarks/bench_nio.py [--frames 1:140] [--max-iter 10] [--out scenarios/styles/walk.yaml]
+
+Re-synthesis: a motion with the clip's own footprints (initialised from the clip), with the
+learned style, the default style and the learned style with springs off (paper §7
+ablations); joint-angle RMS (deg) of each against the clip's motion.  Last line, exactly:
+``nio_s=<float> iterations=<int> g_initial=<float> g_final=<float> resynth_rms_deg=<float>``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+from schedules.cli_learn import learn_from_bvh, parse_frames  # noqa: E402
+from scenegraph.nio import joint_rms_deg  # noqa: E402
+from scenegraph.style import default_style  # noqa: E402
+from scenegraph.synthesis import synthesize  # noqa: E402
+
+CLIP = ROOT / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--frames", default="1:140")
+    ap.add_argument("--max-iter", type=int, default=10)
+    ap.add_argument("--out", default=None, help="also write the learned style here")
+    args = ap.parse_args()
+    frames = parse_frames(args.frames)
+
+    def progress(r):
+        print(f"iter {r.iteration} G={r.G:.6g} D={r.D:.3g} E_T={r.E_target:.6g} E_S={r.E_counter:.6g} "
+              f"beta={r.beta:g} t={r.seconds:.1f}s", flush=True)
+
+    t = time.perf_counter()
+    res, (ch, XT, steps, clip) = learn_from_bvh(CLIP, frames, "adult_male", args.out, name="walk",
+                                                progress=progress, max_iter=args.max_iter)
+    nio_s = time.perf_counter() - t
+    print(f"stop: {res.stop_reason}; evaluations {res.evaluations}", flush=True)
+
+    learned = res.style
+    M = len(learned.alpha)
+    variants = {
+        "learned": learned,
+        "default": default_style(ch.total_mass),
+        "springs_off": learned.with_(ks1=np.zeros(M), ks2=np.zeros(M), kd=np.zeros(M), k_shoe=0.0),
+    }
+    rms = {}
+    for name, st in variants.items():
+        syn = synthesize(ch, st, steps, XT.start, XT.end, init=XT)
+        rms[name] = joint_rms_deg(syn.result.motion, XT)
+        print(f"resynth {name}: rms {rms[name]:.3f} deg ({syn.result.summary()})", flush=True)
+    print(f"nio_s={nio_s:.3f} iterations={res.iterations} g_initial={res.g_initial:.6g} "
+          f"g_final={res.g_final:.6g} resynth_rms_deg={rms['learned']:.4f}")
+
+
+if __name__ == "__main__":
+    main()
