@@ -175,7 +175,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
 
     rep = {
         "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),
-        "jobs": jobs, "resumed_steps": result.resumed, "fps": fps,
+        "jobs": jobs, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
         "steps": [r.to_dict() for r in result.records],
         "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
                                 "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}

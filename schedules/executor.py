@@ -92,6 +92,7 @@ class RunResult:
     seconds: float
     contact_forces: dict  # character -> contact forces of its last full step
     resumed: int = 0
+    presolve: dict = field(default_factory=dict)  # character -> kinematic pre-solve summary
 
 
 # --- helpers ----------------------------------------------------------------------------------
@@ -223,6 +224,16 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...]) -> dict:
     return out
 
 
+def presolve_character(scene: Scene, who: str) -> dict:
+    """Make a character's initial motion satisfy its footsteps and the ground (no dynamics)."""
+    st = scene.character(who)
+    pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps)
+    return {"step": f"presolve:{who}", "ctrl": np.asarray(pre.motion.ctrl, float),
+            "warp": np.asarray(pre.motion.warp, float), "status": pre.status, "success": bool(pre.success),
+            "iterations": pre.iterations, "seconds": pre.seconds,
+            "violations": {k: float(v) for k, v in pre.violations.items()}}
+
+
 def _apply(scene: Scene, data: dict) -> Scene:
     for who, d in data["characters"].items():
         old = scene.character(who)
@@ -343,7 +354,35 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
     done = 0
     solve_seconds = 0.0
     pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else None
+    presolved: dict = {}
     try:
+        # 0. one kinematic pre-solve per character, before its first step (checkpointed too)
+        names = list(first_of)
+        loaded, todo_pre = {}, []
+        for who in names:
+            f = run_dir / "steps" / f"000_{who}.pkl"
+            if resume and f.exists():
+                with open(f, "rb") as fh:
+                    loaded[who] = pickle.load(fh)
+            else:
+                todo_pre.append(who)
+        if pool is not None and len(todo_pre) > 1:
+            futs = {who: pool.submit(presolve_character, scene, who) for who in todo_pre}
+            fresh = {who: futs[who].result() for who in todo_pre}
+        else:
+            fresh = {who: presolve_character(scene, who) for who in todo_pre}
+        for who in names:
+            d = loaded.get(who) or fresh[who]
+            if who in fresh:
+                d["fingerprint"] = fingerprint
+                _atomic_pickle(d, run_dir / "steps" / f"000_{who}.pkl")
+            elif d.get("fingerprint") != fingerprint:
+                raise InputError(f"--resume: checkpoint of the pre-solve of {who!r} does not belong to this run")
+            print(f"[0/{n}] presolve {who}: {d['status']}, {d['iterations']} it, {d['seconds']:.1f} s"
+                  + (" (resumed)" if who in loaded else ""), file=log, flush=True)
+            presolved[who] = {k: d[k] for k in ("status", "success", "iterations", "seconds", "violations")}
+            if d["success"]:
+                scene = scene.with_motion(who, Motion(np.asarray(d["ctrl"]), np.asarray(d["warp"])))
         for gen in schedule.generations():
             gen = sorted(gen, key=lambda s: index[s.id])
             snapshot = scene
@@ -362,7 +401,7 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                     print(f"[{index[s.id] + 1}/{n}] {s.id}: resumed from {f}", file=log, flush=True)
                 else:
                     todo.append(s)
-            pre = {s.id: tuple(w for w in s.characters if first_of[w] == s.id) for s in todo}
+            pre = {s.id: () for s in todo}  # kinematic pre-solves ran before the first generation
             if pool is not None and len(todo) > 1:
                 futures = [(s, pool.submit(solve_step, snapshot, s, pre[s.id])) for s in todo]
                 pending = [(s, fu.result) for s, fu in futures]
@@ -406,4 +445,5 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
-    return RunResult(scene, [records[i] for i in sorted(records)], time.perf_counter() - t_start, contact, resumed)
+    return RunResult(scene, [records[i] for i in sorted(records)], time.perf_counter() - t_start, contact, resumed,
+                     presolved)
