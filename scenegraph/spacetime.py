@@ -93,7 +93,8 @@ class Subproblem:
     "q" (spline control points), "warp", "footprints" (positions of footsteps with
     ``free=True``); λ is always free where a handle is planted.  ``dynamics`` is "full"
     (energy with w_r) or "relaxed" (root residual weight divided by 100: timing steps).
-    "kinematic" drops the dynamics and stays near the initial motion (a kinematic
+    ``cyclic`` makes the motion end in the state it began (velocities too), moved along
+    the ground (root x, y free).  "kinematic" drops the dynamics and stays near the initial motion (a kinematic
     pre-solve that makes the initial guess satisfy the constraints).  ``style_end`` blends θ linearly over the window toward another style (transitions).
     """
 
@@ -108,9 +109,11 @@ class Subproblem:
     poses: tuple[PoseTarget, ...] = ()
     avoid: tuple[Avoid, ...] = ()
     style_end: Style | None = None
-    collocation_hz: float = 30.0
+    collocation_hz: float = 30.0  # dynamics (energy, contact forces)
+    constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
     fix_start_time: bool = True
     fix_end_time: bool = True
+    cyclic: bool = False
     min_foot_separation: float = 0.06
     max_iter: int = 300
     tol: float = 1e-4
@@ -223,11 +226,11 @@ def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     return mask
 
 
-def _collocation_grid(sp: Subproblem, ch: Character) -> np.ndarray:
-    """Uniform points in s plus every contact interval's ends (so a footprint holds exactly
-    from touch-down to lift-off); uniform points too close to an end are dropped."""
+def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
+    """Uniform points in s at ``hz`` plus every contact interval's ends (so a footprint holds
+    exactly from touch-down to lift-off); uniform points too close to an end are dropped."""
     m = sp.motion
-    n = max(8, int(round(m.duration * sp.collocation_hz)) + 1)
+    n = max(8, int(round(m.duration * hz)) + 1)
     uniform = np.linspace(0.0, 1.0, n)
     ends = []
     for step in sp.footsteps:
@@ -252,7 +255,8 @@ def build(sp: Subproblem) -> Built:
     ch, m = sp.character, sp.motion
     K, nW = m.n_ctrl, len(m.warp)
     mg = ch.total_mass * G
-    s = _collocation_grid(sp, ch)
+    s = _collocation_grid(sp, ch, sp.collocation_hz)
+    s_con = _collocation_grid(sp, ch, sp.constraint_hz) if sp.constraint_hz > sp.collocation_hz else s
     N = len(s)
     wq = np.zeros(N)  # trapezoid weights in s
     wq[1:] += np.diff(s) / 2
@@ -294,8 +298,8 @@ def build(sp: Subproblem) -> Built:
             ks = np.flatnonzero((s >= sa - 1e-9) & (s <= sb + 1e-9))
             for k in ks:
                 planted.append((handle, int(k), xy, si))
-            for k in ks:
-                pins.append((handle, float(s[k]), xy))
+            for v in s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]:
+                pins.append((handle, float(v), xy))
     n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
     xL = ca.MX.sym("L", n_lam)
     V = friction_basis()
@@ -380,7 +384,8 @@ def build(sp: Subproblem) -> Built:
                 for c, (h, _, xy) in enumerate(pins)]
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
     # ground non-penetration of every foot handle at every point
-    ground = ca.vertcat(*[HP[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
+    HPc = HP if s_con is s else hk.map(len(s_con))(ca.mtimes(_sparse(basis(K, s_con, 0)), P).T)
+    ground = ca.vertcat(*[HPc[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
     add("penetration", ground, 0.0, np.inf, "ineq")
     # feet not crossing: left ankle stays left of the right one, in the pelvis heading frame
     yaw = Q[3, :]
@@ -388,6 +393,11 @@ def build(sp: Subproblem) -> Built:
         HP[3 * hk_names.index("ankle_r"):3 * hk_names.index("ankle_r") + 2, :]
     lateral = -ca.sin(yaw) * dl[0, :] + ca.cos(yaw) * dl[1, :]
     add("feet_crossing", lateral, sp.min_foot_separation, np.inf, "ineq")
+    if sp.cyclic:  # thesis §2.2.2: the cycle ends where it began, moved along the ground
+        qs, qe = ca.mtimes(_sparse(basis(K, [0.0], 0)), P).T, ca.mtimes(_sparse(basis(K, [1.0], 0)), P).T
+        vs = ca.mtimes(_sparse(basis(K, [0.0], 1)), P).T / ca.mtimes(_sparse(basis(nW, [0.0], 1)), warp)
+        ve = ca.mtimes(_sparse(basis(K, [1.0], 1)), P).T / ca.mtimes(_sparse(basis(nW, [1.0], 1)), warp)
+        add("cyclic", ca.vertcat(qe[2:] - qs[2:], ve - vs), 0.0, 0.0)
     # monotone warp with a minimum slope (world seconds per unit s)
     if warp_free:
         add("warp_monotone", xW[1:] - xW[:-1], 0.05 * m.duration / nW, np.inf, "ineq")
