@@ -111,6 +111,8 @@ class Subproblem:
     style_end: Style | None = None
     collocation_hz: float = 30.0  # dynamics (energy, contact forces)
     constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
+    soft_pin_hz: float = 120.0  # soft footprint springs between the hard points (0: off)
+    soft_pin_weight: float = 1e5  # total weight, shared by the soft points
     fix_start_time: bool = True
     fix_end_time: bool = True
     cyclic: bool = False
@@ -384,6 +386,25 @@ def build(sp: Subproblem) -> Built:
                 for c, (h, _, xy) in enumerate(pins)]
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
     # ground non-penetration of every foot handle at every point
+    if sp.soft_pin_hz > 0 and pins:
+        # soft footprints between the hard points: least squares (Gauss–Newton friendly),
+        # keeps planted feet still between collocation points without degenerate constraints
+        dense = np.linspace(0, 1, max(2, int(round(m.duration * sp.soft_pin_hz)) + 1))
+        soft = []
+        for step_i, step in enumerate(sp.footsteps):
+            pos = None
+            if step_i in free_steps:
+                j = free_steps.index(step_i)
+                pos = (xF[2 * j], xF[2 * j + 1])
+            for handle, (ta, tb), xy in contact_points(ch, step, pos):
+                sa, sb = m.to_canonical([ta, tb])
+                for v in dense[(dense > sa) & (dense < sb)]:
+                    soft.append((handle, float(v), xy))
+        if soft:
+            HPs = hk.map(len(soft))(ca.mtimes(_sparse(basis(K, [v for _, v, _ in soft], 0)), P).T)
+            rows = [HPs[3 * hk_names.index(h):3 * hk_names.index(h) + 3, c] - ca.vertcat(xy[0], xy[1], 0.0)
+                    for c, (h, _, xy) in enumerate(soft)]
+            rho_extra.append(np.sqrt(sp.soft_pin_weight / len(soft)) * ca.vertcat(*rows))
     HPc = HP if s_con is s else hk.map(len(s_con))(ca.mtimes(_sparse(basis(K, s_con, 0)), P).T)
     ground = ca.vertcat(*[HPc[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
     add("penetration", ground, 0.0, np.inf, "ineq")
