@@ -169,7 +169,7 @@ class NIO:
     """
 
     def __init__(self, ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *,
-                 solve_iter: int = 60, collocation_hz: float = 30.0, tol: float = 1e-4):
+                 solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4):
         self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
         self.sp = Subproblem(ch, default_style(ch.total_mass), target, self.footsteps, free=frozenset({"q"}),
                              collocation_hz=collocation_hz, max_iter=solve_iter, tol=tol, label="nio")
@@ -306,6 +306,9 @@ class NIO:
         g0 = cur.G + cur.D
         slow, reason, it = 0, "max_iter", 0
         cache: dict[float, _Eval] = {}
+        if cur.G <= 0.0:
+            reason = "no counterexample: the solver found no motion below E(X_T) (raise solve_iter)"
+            max_iter = 0
         for it in range(1, max_iter + 1):
             if cur.G + cur.D <= g_abs * max(g0, 1e-300):
                 reason = "G below tolerance"
@@ -428,7 +431,7 @@ def _versions() -> dict[str, str]:
 
 def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *, init: Style | str = "paper",
                 name: str = "learned", clip: str | None = None, frames: str | None = None,
-                body: str | None = None, callback=None, solve_iter: int = 60, **run_kw) -> NIOResult:
+                body: str | None = None, callback=None, solve_iter: int = 80, **run_kw) -> NIOResult:
     """Learn a style from ``target``.  ``init``: "paper" (α = 1/M, q̄ = mean pose, springs by
     Eq. 22) or a Style to start from.  The returned style carries its provenance."""
     nio = NIO(ch, target, footsteps, solve_iter=solve_iter)

@@ -107,7 +107,7 @@ def test_synthetic_recovery():
     star = d.with_(alpha=a / a.sum(), ks1=d.ks1 * 1.5, ks2=d.ks2 * 0.7, name="star")
     fs = footsteps_for_walk(n_steps=3)
     XT = synthesize(ch, star, fs, 0.0, 1.3).result.motion
-    nio = NIO(ch, XT, fs, solve_iter=30)
+    nio = NIO(ch, XT, fs, solve_iter=80)
     hist = []
     out = nio.run(d.vector(), max_iter=4, callback=hist.append)
     Gs = [h.G + h.D for h in hist if h.beta > 0 or h.iteration == 0]
