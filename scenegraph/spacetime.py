@@ -111,6 +111,8 @@ class Subproblem:
     style_end: Style | None = None
     collocation_hz: float = 30.0  # dynamics (energy, contact forces)
     constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
+    ground_hz: float = 0.0  # extra grid for non-penetration (0: the constraint grid; denser grids
+    # were measured to stall IPOPT: 300 iterations without convergence at 90 Hz)
     soft_pin_hz: float = 120.0  # soft footprint springs between the hard points (0: off)
     soft_pin_weight: float = 1e5  # total weight, shared by the soft points
     fix_start_time: bool = True
@@ -405,7 +407,9 @@ def build(sp: Subproblem) -> Built:
             rows = [HPs[3 * hk_names.index(h):3 * hk_names.index(h) + 3, c] - ca.vertcat(xy[0], xy[1], 0.0)
                     for c, (h, _, xy) in enumerate(soft)]
             rho_extra.append(np.sqrt(sp.soft_pin_weight / len(soft)) * ca.vertcat(*rows))
-    HPc = HP if s_con is s else hk.map(len(s_con))(ca.mtimes(_sparse(basis(K, s_con, 0)), P).T)
+    s_gnd = s_con if sp.ground_hz <= 0 else \
+        np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])
+    HPc = hk.map(len(s_gnd))(ca.mtimes(_sparse(basis(K, s_gnd, 0)), P).T)
     ground = ca.vertcat(*[HPc[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
     add("penetration", ground, 0.0, np.inf, "ineq")
     # feet not crossing: left ankle stays left of the right one, in the pelvis heading frame
