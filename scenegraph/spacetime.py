@@ -113,7 +113,7 @@ class Subproblem:
     constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
     ground_hz: float = 0.0  # extra grid for non-penetration (0: the constraint grid; denser grids
     # were measured to stall IPOPT: 300 iterations without convergence at 90 Hz)
-    soft_pin_hz: float = 120.0  # soft footprint springs between the hard points (0: off)
+    soft_pin_hz: float = 0.0  # soft footprint springs between the hard points (0: off; see README)
     soft_pin_weight: float = 1e5  # total weight, shared by the soft points
     fix_start_time: bool = True
     fix_end_time: bool = True

@@ -25,7 +25,7 @@ def main() -> None:
     print(f"kernel compile/load: {time.perf_counter() - t:.2f} s")
     steps = footsteps_for_walk()
     t = time.perf_counter()
-    syn = synthesize(ch, style, steps, steps[1].t0, steps[-1].t0)
+    syn = synthesize(ch, style, steps, steps[1].t0, steps[-1].t0, soft_pin_hz=120.0)
     wall = time.perf_counter() - t
     print(syn.presolve.summary())
     print(syn.result.summary())
