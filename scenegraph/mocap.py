@@ -17,6 +17,10 @@ Pipeline (:func:`load_clip` runs all of it):
    mapped points of every frame at once (CasADi + IPOPT, joint limits kept, a small
    smoothness term), giving q (T, 35).
 5. :func:`~scenegraph.contacts.detect_footsteps` finds per-foot contact intervals.
+6. :func:`reconstruct` (NIO paper, Appendix A) turns the fitted clip into a smooth
+   :class:`~scenegraph.motion.Motion` whose root residual is (softly) zero, with contact
+   forces at the detected contacts; :func:`reconstruct_clip` also returns the forces,
+   footprints, fit error and residual.
 
 Nothing here writes files.
 """
@@ -35,10 +39,12 @@ from scenarios.yamlio import load_model
 
 from .body import Character, make_character, PRESETS
 from .bvh import (BvhFile, END_SUFFIX, bvh_forward_kinematics, bvh_local_pose, read_bvh, resample_pose)
-from .retarget import PointSpec, point_name as _point_name, point_positions
+from .retarget import PointSpec, Reconstruction, point_name as _point_name, point_positions, reconstruct, \
+    reconstruct_clip
 
 __all__ = ["Rig", "RigVariant", "load_rig", "RIG_DIR", "ClipData", "MocapClip", "read_clip", "load_clip",
-           "detect_tpose", "estimate_floor", "estimate_stature", "axes_matrix"]
+           "detect_tpose", "estimate_floor", "estimate_stature", "axes_matrix", "PointSpec",
+           "reconstruct", "reconstruct_clip", "Reconstruction"]
 
 RIG_DIR = Path(__file__).resolve().parent.parent / "scenarios" / "rigs"
 DEFAULT_RIG = "cmu"

@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -26,7 +27,7 @@ from .body import Character, N_DOF, N_ROOT, standing_pose
 from .kinematics import frame_transforms
 
 __all__ = ["PointSpec", "point_name", "resolve_point", "point_expr", "points_fn", "point_positions", "retarget",
-           "initial_guess", "RetargetError"]
+           "initial_guess", "RetargetError", "Reconstruction", "reconstruct", "reconstruct_clip"]
 
 
 class RetargetError(ComposeError):
@@ -268,3 +269,456 @@ def retarget(data, ch: Character, smoothness: float = 1e-3, rest_weight: float =
     info = {"status": stats["return_status"], "iterations": int(stats["iter_count"]),
             "seconds": time.perf_counter() - t0, "objective": float(sol["f"])}
     return MocapClip(data, ch, q, err, info)
+
+
+# --- smooth reconstruction (NIO paper, Appendix A) --------------------------------------------
+
+CONTACT_HANDLES = ("heel_l", "ball_l", "toe_l", "heel_r", "ball_r", "toe_r")
+W_ROOT = 100.0
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """Outcome of :func:`reconstruct_clip`: the motion plus what the fit says about it.
+
+    ``contact_forces`` maps a contact handle to (times (n,), world forces (n, 3) N);
+    ``footprints`` lists (handle, start s, end s, (x, y)) of the planted contacts;
+    ``fit_error`` (T, K) the distance (m) of each fitted point to its clip point;
+    ``root_residual`` (N, 6) the residual root force Q_0 at the collocation times, in units
+    of body weight (N/(m g) for translations, N·m/(m g) = m for rotations).
+    """
+
+    motion: "object"  # scenegraph.motion.Motion
+    times: np.ndarray
+    q: np.ndarray
+    fit_error: np.ndarray
+    root_residual: np.ndarray
+    contact_forces: dict
+    footprints: tuple
+    solver: dict
+
+
+@functools.lru_cache(maxsize=8)
+def _root_kernel(ch: Character) -> ca.Function:
+    """(q, q̇, q̈, forces at CONTACT_HANDLES (18, world N)) → Q_0 (6): the root residual."""
+    from .dynamics import rnea
+
+    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
+    fc = ca.SX.sym("f", 3 * len(CONTACT_HANDLES))
+    ext = []
+    for i, name in enumerate(CONTACT_HANDLES):
+        h = ch.handle(name)
+        ext.append((ch.body(h.body).frame, h.point, fc[3 * i:3 * i + 3]))
+    tau = rnea(ch, q, qd, qdd, ext)
+    return ca.Function("root_residual", [q, qd, qdd, fc], [tau[:N_ROOT]])
+
+
+@functools.lru_cache(maxsize=8)
+def _recon_kernels(ch: Character, specs: tuple) -> tuple[ca.Function, ca.Function]:
+    """Per-frame kernels with their Jacobians (SX, mapped over frames by the caller):
+
+    kin(q)              → points (3, K), d points/dq (3K, 35), contact handles (3, 6), d/dq (18, 35)
+    root(q, q̇, q̈, f)   → Q_0 (6), dQ_0/d(q, q̇, q̈, f) (6, 123)
+    """
+    q = ca.SX.sym("q", N_DOF)
+    tr = frame_transforms(ch, q)
+    X = ca.horzcat(*[point_expr(ch, q, n, tr) for n in specs])
+    Hc = ca.horzcat(*[point_expr(ch, q, n, tr) for n in CONTACT_HANDLES])
+    kin = ca.Function("recon_kin", [q], [X, ca.jacobian(ca.vec(X), q), Hc, ca.jacobian(ca.vec(Hc), q)])
+    qd, qdd = ca.SX.sym("qd", N_DOF), ca.SX.sym("qdd", N_DOF)
+    fc = ca.SX.sym("f", 3 * len(CONTACT_HANDLES))
+    q0 = _root_kernel(ch)(q, qd, qdd, fc)
+    root = ca.Function("recon_root", [q, qd, qdd, fc], [q0, ca.jacobian(q0, ca.vertcat(q, qd, qdd, fc))])
+    return kin, root
+
+
+class _LeastSquares:
+    """r(x), sparse J(x) of the reconstruction, assembled from per-frame kernels in numpy."""
+
+    def __init__(self, ch, specs, targets, w, times, K, contacts, pairs, w_root, w_contact, planted, w_acc=0.0):
+        from .body import G
+        from .dynamics import friction_basis
+        from .motion import basis
+
+        self.T, self.Kp = targets.shape[:2]
+        T = self.T
+        self.K = K
+        self.dur = float(times[-1] - times[0])
+        s = (times - times[0]) / self.dur
+        self.B = [basis(K, s, d) for d in (0, 1, 2)]
+        self.mg = ch.total_mass * G
+        self.kin, self.root = (f.map(T, "serial") for f in _recon_kernels(ch, specs))
+        self.targets = targets
+        self.sw = np.sqrt(w / T)  # (Kp,)
+        wq = np.full(T, 1.0 / (T - 1))
+        wq[[0, -1]] *= 0.5
+        self.cr = np.sqrt(w_root * wq * self.dur) / self.mg  # (T,)
+        self.pairs = pairs
+        self.planted = planted
+        self.cc = math.sqrt(w_contact / T)
+        self.nc = len(contacts)
+        self.n_ctrl = K * N_DOF
+        self.n_lam = 4 * len(pairs)
+        self.n = self.n_ctrl + self.n_lam + (2 * self.nc if planted else 0)
+        self.V = friction_basis()
+        # the spline support of each frame: up to 4 control points
+        self.span = [np.flatnonzero(np.abs(self.B[0][f]) + np.abs(self.B[1][f]) + np.abs(self.B[2][f]) > 0)
+                     for f in range(T)]
+        self.h_index = [CONTACT_HANDLES.index(h) for _, h, _ in pairs]
+        self.by_frame = [[] for _ in range(T)]
+        for j, (_, _, k) in enumerate(pairs):
+            self.by_frame[k].append(j)
+        self.ca = np.sqrt(w_acc * wq * self.dur)  # (T,) acceleration regulariser weights
+        self.m = 3 * self.Kp * T + 6 * T + (3 * len(pairs) if planted else 0) + self.n_lam + N_DOF * T
+
+    def unpack(self, x):
+        ctrl = x[:self.n_ctrl].reshape(self.K, N_DOF)
+        lam = x[self.n_ctrl:self.n_ctrl + self.n_lam]
+        F = x[self.n_ctrl + self.n_lam:].reshape(-1, 2)
+        return ctrl, lam, F
+
+    def forces(self, lam):
+        """(T, 18) world contact forces at CONTACT_HANDLES."""
+        f = np.zeros((self.T, 3 * len(CONTACT_HANDLES)))
+        for j, (_, h, k) in enumerate(self.pairs):
+            hi = self.h_index[j]
+            f[k, 3 * hi:3 * hi + 3] += self.mg * self.V @ lam[4 * j:4 * j + 4]
+        return f
+
+    def evaluate(self, x, jac: bool = True):
+        import scipy.sparse as sps
+
+        T, Kp = self.T, self.Kp
+        ctrl, lam, F = self.unpack(x)
+        Q = self.B[0] @ ctrl
+        Qd = self.B[1] @ ctrl / self.dur
+        Qdd = self.B[2] @ ctrl / self.dur ** 2
+        fc = self.forces(lam)
+        X, JX, Hc, JH = (np.asarray(a) for a in self.kin(Q.T))
+        Q0, JR = (np.asarray(a) for a in self.root(Q.T, Qd.T, Qdd.T, fc.T))
+        X = X.reshape(3, T, Kp).transpose(1, 2, 0)  # (T, Kp, 3)
+        Hc = Hc.reshape(3, T, 6).transpose(1, 2, 0)  # (T, 6, 3)
+        r_fit = ((X - self.targets) * self.sw[None, :, None]).ravel()
+        r_root = (Q0.T * self.cr[:, None]).ravel()  # (T*6,)
+        parts = [r_fit, r_root]
+        if self.planted and self.pairs:
+            r_c = np.array([Hc[k, self.h_index[j]] - np.array([F[ci, 0], F[ci, 1], 0.0])
+                            for j, (ci, _, k) in enumerate(self.pairs)]) * self.cc
+            parts.append(r_c.ravel())
+        parts.append(1e-3 * lam)
+        parts.append((Qdd * self.ca[:, None]).ravel())
+        r = np.concatenate(parts)
+        self.Q0 = Q0.T
+        if not jac:
+            return r, None
+        rows, cols, vals = [], [], []
+        JX = JX.reshape(3 * Kp, T, N_DOF)  # rows: vec(X) of one frame = point-major (x,y,z per point)
+        JH = JH.reshape(18, T, N_DOF)
+        JR = JR.reshape(6, T, 3 * N_DOF + 18)
+        base_root = 3 * Kp * T
+        cidx = np.arange(N_DOF)
+        for f in range(T):
+            ks = self.span[f]
+            # fit rows of frame f: row (f*Kp + kp)*3 + a  ↔  vec index kp*3 + a
+            blk = JX[:, f, :] * np.repeat(self.sw, 3)[:, None]  # (3Kp, 35)
+            b0 = self.B[0][f, ks]
+            rr = f * 3 * Kp + np.arange(3 * Kp)
+            for kk, bk in zip(ks, b0):
+                if bk != 0.0:
+                    rows.append(np.repeat(rr, N_DOF))
+                    cols.append(np.tile(kk * N_DOF + cidx, 3 * Kp))
+                    vals.append((blk * bk).ravel())
+            # root rows of frame f
+            Jq, Jqd, Jqdd, Jf = (JR[:, f, :N_DOF], JR[:, f, N_DOF:2 * N_DOF], JR[:, f, 2 * N_DOF:3 * N_DOF],
+                                 JR[:, f, 3 * N_DOF:])
+            rr = base_root + 6 * f + np.arange(6)
+            for kk in ks:
+                blk = (Jq * self.B[0][f, kk] + Jqd * self.B[1][f, kk] / self.dur
+                       + Jqdd * self.B[2][f, kk] / self.dur ** 2) * self.cr[f]
+                rows.append(np.repeat(rr, N_DOF))
+                cols.append(np.tile(kk * N_DOF + cidx, 6))
+                vals.append(blk.ravel())
+            for j in self.by_frame[f]:
+                hi = self.h_index[j]
+                blk = Jf[:, 3 * hi:3 * hi + 3] @ (self.mg * self.V) * self.cr[f]  # (6, 4)
+                rows.append(np.repeat(rr, 4))
+                cols.append(np.tile(self.n_ctrl + 4 * j + np.arange(4), 6))
+                vals.append(blk.ravel())
+        row0 = base_root + 6 * T
+        if self.planted and self.pairs:
+            for j, (ci, _, k) in enumerate(self.pairs):
+                hi = self.h_index[j]
+                rr = row0 + 3 * j + np.arange(3)
+                blk = JH[3 * hi:3 * hi + 3, k, :] * self.cc
+                for kk, bk in zip(self.span[k], self.B[0][k, self.span[k]]):
+                    if bk != 0.0:
+                        rows.append(np.repeat(rr, N_DOF))
+                        cols.append(np.tile(kk * N_DOF + cidx, 3))
+                        vals.append((blk * bk).ravel())
+                rows.append(rr[:2])
+                cols.append(self.n_ctrl + self.n_lam + 2 * ci + np.arange(2))
+                vals.append(np.full(2, -self.cc))
+            row0 += 3 * len(self.pairs)
+        rows.append(row0 + np.arange(self.n_lam))
+        cols.append(self.n_ctrl + np.arange(self.n_lam))
+        vals.append(np.full(self.n_lam, 1e-3))
+        row0 += self.n_lam
+        for f in range(T):  # acceleration rows: q̈_f = B2[f] ctrl / dur²
+            rr = row0 + N_DOF * f + cidx
+            for kk in self.span[f]:
+                rows.append(rr)
+                cols.append(kk * N_DOF + cidx)
+                vals.append(np.full(N_DOF, self.B[2][f, kk] / self.dur ** 2 * self.ca[f]))
+        J = sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(len(r), self.n))
+        return r, J
+
+
+class _Cache:
+    def __init__(self, ls):
+        self.ls, self.x, self.r, self.J = ls, None, None, None
+
+    def get(self, x, jac=True):
+        x = np.asarray(x, dtype=float).ravel()
+        if self.x is None or not np.array_equal(x, self.x) or (jac and self.J is None):
+            self.r, self.J = self.ls.evaluate(x, jac)
+            self.x = x.copy()
+        return self.r, self.J
+
+
+class _FCallback(ca.Callback):
+    def __init__(self, cache, n):
+        ca.Callback.__init__(self)
+        self.cache, self.n = cache, n
+        self.construct("recon_f", {"enable_fd": False})
+
+    def get_n_in(self):
+        return 1
+
+    def get_n_out(self):
+        return 1
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.n, 1)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(1, 1)
+
+    def eval(self, arg):
+        r, _ = self.cache.get(arg[0], jac=False)
+        return [float(r @ r)]
+
+    # CasADi's NLP factory differentiates f once (for the gradient); hand it ours.
+    def has_jacobian(self):
+        return True
+
+    def get_jacobian(self, name, inames, onames, opts):
+        self._jac = _JacCallback(name, self.cache, self.n, opts)
+        return self._jac
+
+
+class _JacCallback(ca.Callback):
+    def __init__(self, name, cache, n, opts):
+        ca.Callback.__init__(self)
+        self.cache, self.n = cache, n
+        self.construct(name, opts)
+
+    def get_n_in(self):
+        return 2  # x, f (nominal output)
+
+    def get_n_out(self):
+        return 1
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.n, 1) if i == 0 else ca.Sparsity.dense(1, 1)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(1, self.n)
+
+    def eval(self, arg):
+        r, J = self.cache.get(arg[0])
+        return [ca.DM(2.0 * (J.T @ r)).T]
+
+
+class _GradCallback(ca.Callback):
+    def __init__(self, cache, n):
+        ca.Callback.__init__(self)
+        self.cache, self.n = cache, n
+        self.construct("recon_grad_f", {})
+
+    def get_n_in(self):
+        return 2
+
+    def get_n_out(self):
+        return 2
+
+    def get_name_in(self, i):
+        return ("x", "p")[i]
+
+    def get_name_out(self, i):
+        return ("f", "grad")[i]
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.n, 1) if i == 0 else ca.Sparsity.dense(0, 1)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(1, 1) if i == 0 else ca.Sparsity.dense(self.n, 1)
+
+    def eval(self, arg):
+        r, J = self.cache.get(arg[0])
+        return [float(r @ r), ca.DM(2.0 * (J.T @ r))]
+
+
+class _HessCallback(ca.Callback):
+    """Gauss–Newton Hessian 2 λ_f JᵀJ (upper triangle) on a fixed sparsity pattern."""
+
+    def __init__(self, cache, n, pattern):
+        ca.Callback.__init__(self)
+        self.cache, self.n = cache, n
+        coo = pattern.tocoo()
+        keep = coo.row <= coo.col
+        r, c = coo.row[keep], coo.col[keep]
+        order = np.lexsort((r, c))  # column-major, rows ascending: CasADi's CCS order
+        self.r, self.c = r[order], c[order]
+        self.sp = ca.Sparsity.triplet(n, n, self.r.tolist(), self.c.tolist())
+        self.construct("recon_hess", {})
+
+    def get_n_in(self):
+        return 4
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ("x", "p", "lam_f", "lam_g")[i]
+
+    def get_name_out(self, i):
+        return "hess_gamma_x_x"
+
+    def get_sparsity_in(self, i):
+        return [ca.Sparsity.dense(self.n, 1), ca.Sparsity.dense(0, 1), ca.Sparsity.dense(1, 1),
+                ca.Sparsity.dense(0, 1)][i]
+
+    def get_sparsity_out(self, i):
+        return self.sp
+
+    def eval(self, arg):
+        _, J = self.cache.get(arg[0])
+        H = (J.T @ J).tocsr()
+        lam_f = float(arg[2])
+        vals = np.asarray(H[self.r, self.c]).ravel() * 2.0 * lam_f
+        return [ca.DM(self.sp, vals)]
+
+
+def reconstruct_clip(clip, ctrl_hz: float = 10.0, w_root: float = W_ROOT, planted: bool = True,
+                     w_contact: float = 10.0, contacts=None, max_iter: int = 100, tol: float = 1e-8,
+                     w_acc: float = 1e-7, obj_scale: float = 100.0, verbose: bool = False) -> Reconstruction:
+    """Appendix A: fit a B-spline motion to the clip's points with the root residual softly zero.
+
+        min  Σ_f Σ_k w_k ‖x_k(q(t_f)) − p_kf‖² / T  +  w_r Σ_n h ‖Q_0(t_n) / (m g)‖²
+           +  w_c Σ_contacts Σ_f ‖h(q(t_f)) − (x_c, y_c, 0)‖² / T        (with ``planted``)
+           +  10⁻⁶ ‖λ‖²  +  w_a Σ_n h ‖q̈(t_n)‖²
+        over spline control points (within joint limits), contact coefficients λ ≥ 0 (force
+        m g V λ at each contact handle while it is in contact) and the contact positions
+        (x_c, y_c): a contact handle is pulled to one point on the floor over its interval.
+
+    Collocation points are the clip's frames (h their quadrature weights × duration).
+    ``contacts`` defaults to :func:`~scenegraph.contacts.detect_contacts` of the retargeted
+    clip.  Everything is a sum of squares, so IPOPT gets a Gauss–Newton Hessian, assembled
+    with the gradient from per-frame kernels (callbacks); only bounds constrain it.  (Hard
+    contact constraints with CasADi's automatic derivatives made IPOPT wander for hundreds of
+    iterations at seconds each.)
+    """
+    import scipy.sparse as sps
+
+    from .contacts import detect_contacts
+    from .dynamics import friction_basis
+    from .motion import Motion
+
+    t_start = time.perf_counter()
+    ch = clip.character
+    data = clip.data
+    specs = tuple(data.target_specs)
+    times = np.asarray(clip.times, dtype=float)
+    T = len(times)
+    if T < 4:
+        raise ComposeError("a reconstruction needs at least 4 frames")
+    duration = float(times[-1] - times[0])
+    K = max(4, int(round(duration * ctrl_hz)) + 3)
+    if contacts is None:
+        contacts = detect_contacts(clip)
+    pairs = [(ci, f"{c.handle}_{c.side}", k) for ci, c in enumerate(contacts)
+             for k in range(c.first_frame, c.last_frame + 1)]
+    w = np.asarray(data.target_weights, dtype=float)
+    ls = _LeastSquares(ch, specs, np.asarray(data.targets), w / w.sum(), times, K, contacts, pairs,
+                       w_root, w_contact, planted, w_acc)
+    cache = _Cache(ls)
+
+    # start: least-squares spline through the retargeted frames; contact forces carrying
+    # the body weight, shared among the handles in contact
+    m0 = Motion.from_samples(times, np.asarray(clip.q), K)
+    ctrl0 = np.clip(m0.ctrl, ch.lower + 1e-9, ch.upper - 1e-9)
+    V = friction_basis()
+    n_in = np.zeros(T)
+    for _, _, k in pairs:
+        n_in[k] += 1
+    lam0 = np.array([1.0 / (4 * V[2, 0] * n_in[k]) for _, _, k in pairs for _ in range(4)])
+    F0 = np.array([c.position[:2] for c in contacts]).ravel() if planted else np.zeros(0)
+    x0 = np.concatenate([ctrl0.ravel(), lam0, F0])
+    # λ for that motion: a bounded linear least-squares problem (Q_0 is linear in λ)
+    r0, J0 = ls.evaluate(x0)
+    if ls.n_lam:
+        from scipy.optimize import lsq_linear
+
+        lam_cols = slice(ls.n_ctrl, ls.n_ctrl + ls.n_lam)
+        A = J0[:, lam_cols]
+        b = r0 - A @ x0[lam_cols]
+        x0[lam_cols] = np.maximum(lsq_linear(A, -b, bounds=(0.0, np.inf), lsmr_tol="auto").x, 1e-6)
+        _, J0 = ls.evaluate(x0)
+    pattern = (abs(J0).T @ abs(J0) + sps.identity(ls.n)).tocsc()  # structural, with the diagonal
+
+    x = ca.MX.sym("x", ls.n)
+    fcb, gcb, hcb = _FCallback(cache, ls.n), _GradCallback(cache, ls.n), _HessCallback(cache, ls.n, pattern)
+    opts = {"grad_f": gcb, "hess_lag": hcb, "print_time": False,
+            # The start is close (retargeted motion, λ from a bounded linear solve): a small
+            # fixed barrier and tight bound push keep the many λ ≈ 0 where they are.  With
+            # λ at its bounds the Gauss–Newton steps creep near the end, so we also accept
+            # when the objective has stopped changing (relative 1e-5 over 5 iterations).
+            "ipopt": {"print_level": 5 if verbose else 0, "max_iter": max_iter, "tol": tol,
+                      "acceptable_tol": 1e3, "acceptable_obj_change_tol": 1e-5, "acceptable_iter": 5,
+                      "linear_solver": "mumps", "sb": "yes",
+                      "mu_strategy": "monotone", "mu_init": 1e-4, "bound_push": 1e-8, "bound_frac": 1e-8,
+                      "obj_scaling_factor": obj_scale}}
+    solver = ca.nlpsol("reconstruct", "ipopt", {"x": x, "f": fcb(x)}, opts)
+    lbx = np.concatenate([np.tile(ch.lower, K), np.zeros(ls.n_lam), np.full(len(F0), -np.inf)])
+    ubx = np.concatenate([np.tile(ch.upper, K), np.full(ls.n_lam, np.inf), np.full(len(F0), np.inf)])
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx)
+    st = solver.stats()
+    xs = np.asarray(sol["x"]).ravel()
+    status = st.get("return_status", "unknown")
+    if not (st.get("success") or status == "Solved_To_Acceptable_Level"):
+        raise RetargetError(f"reconstruction of {data.file} did not converge: {status}")
+
+    ctrl, lam, F = ls.unpack(xs)
+    ls.evaluate(xs, jac=False)
+    motion = Motion(ctrl.copy(), Motion.uniform_warp(times[0], times[-1]))
+    q = ls.B[0] @ ctrl
+    err = np.linalg.norm(point_positions(ch, specs, q) - np.asarray(data.targets), axis=-1)
+    fc = ls.forces(lam)
+    forces: dict = {}
+    for j, (_, hname, k) in enumerate(pairs):
+        hi = CONTACT_HANDLES.index(hname)
+        forces.setdefault(hname, []).append((times[k], fc[k, 3 * hi:3 * hi + 3]))
+    forces = {h: (np.array([t for t, _ in v]), np.array([fv for _, fv in v])) for h, v in forces.items()}
+    prints = tuple((f"{c.handle}_{c.side}", float(times[c.first_frame]), float(times[c.last_frame]),
+                    (float(F[i, 0]), float(F[i, 1])) if planted else tuple(c.position[:2]))
+                   for i, c in enumerate(contacts))
+    info = {"status": status, "iterations": int(st.get("iter_count", -1)),
+            "seconds": time.perf_counter() - t_start, "objective": float(sol["f"]),
+            "n_ctrl": K, "n_contact_pairs": len(pairs)}
+    return Reconstruction(motion, times, q, err, ls.Q0 / ls.mg, forces, prints, info)
+
+
+def reconstruct(clip, **kw):
+    """The smooth reconstruction (Appendix A) of a fitted clip as a :class:`~scenegraph.motion.Motion`."""
+    return reconstruct_clip(clip, **kw).motion

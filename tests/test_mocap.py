@@ -281,3 +281,33 @@ def test_retarget_other_clips(name, frames):
     assert c.solver["status"] == "Solve_Succeeded"
     assert c.mean_fit_error() < 0.03, c.mean_fit_error()
     assert np.all(c.q >= c.character.lower - 1e-6) and np.all(c.q <= c.character.upper + 1e-6)
+
+
+# --- smooth reconstruction (Appendix A) -------------------------------------------------------
+
+def test_reconstruct_one_gait_cycle():
+    from scenegraph.body import G
+    from scenegraph.mocap import reconstruct_clip
+
+    clip = load_clip(C0701, frames=(64, 201))
+    rec = reconstruct_clip(clip)
+    assert rec.solver["status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    m = rec.motion
+    assert m.start == pytest.approx(0.0) and m.end == pytest.approx(clip.times[-1])
+    # the motion reproduces its own samples and stays within joint limits (control points)
+    _, q = m.sample(clip.fps)
+    assert np.allclose(q, rec.q, atol=1e-9)
+    assert np.all(m.ctrl >= clip.character.lower - 1e-6) and np.all(m.ctrl <= clip.character.upper + 1e-6)
+    # still close to the clip, with the root residual (units of body weight) nearly zero
+    assert rec.fit_error.mean() < 0.035
+    assert np.abs(rec.root_residual).max() < 0.01
+    # the contact forces carry the body on average over a gait cycle, and push, never pull
+    mg = clip.character.total_mass * G
+    fz = np.zeros(clip.n_frames)
+    for h, (times, forces) in rec.contact_forces.items():
+        assert np.all(forces[:, 2] >= -1e-6)
+        fz[np.searchsorted(clip.times, times - 1e-9)] += forces[:, 2]
+    assert fz.mean() / mg == pytest.approx(1.0, abs=0.1)
+    # second derivatives stay plausible (no spikes): joint accelerations RMS below 20 rad/s²
+    _, _, qdd = m.at(clip.times)
+    assert np.sqrt(np.mean(qdd[:, 6:] ** 2)) < 20.0
