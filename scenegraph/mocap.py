@@ -46,7 +46,9 @@ __all__ = ["Rig", "RigVariant", "load_rig", "RIG_DIR", "ClipData", "MocapClip", 
            "detect_tpose", "estimate_floor", "estimate_stature", "axes_matrix", "PointSpec",
            "reconstruct", "reconstruct_clip", "Reconstruction"]
 
-RIG_DIR = Path(__file__).resolve().parent.parent / "scenarios" / "rigs"
+import scenarios as _scenarios
+
+RIG_DIR = Path(_scenarios.__file__).resolve().parent / "rigs"  # bundled rig files
 DEFAULT_RIG = "cmu"
 _AXES = {"+X": (0, 1.0), "-X": (0, -1.0), "+Y": (1, 1.0), "-Y": (1, -1.0), "+Z": (2, 1.0), "-Z": (2, -1.0)}
 

@@ -311,3 +311,20 @@ def test_reconstruct_one_gait_cycle():
     # second derivatives stay plausible (no spikes): joint accelerations RMS below 20 rad/s²
     _, _, qdd = m.at(clip.times)
     assert np.sqrt(np.mean(qdd[:, 6:] ** 2)) < 20.0
+
+
+SHARED_TURN = Path("/work/shared/mocap/walk_turn_left_cmu_16_18.bvh")
+
+
+@pytest.mark.skipif(not SHARED_TURN.exists(), reason="delivery folder with the 16_18 turn clip not present")
+def test_turn_clip_root_near_gimbal_lock():
+    """16_18's root Euler angles swing wildly after the 90° left turn (near gimbal lock);
+    slerp resampling must still give a smooth path that ends heading +Y (our left)."""
+    d = read_clip(SHARED_TURN)
+    p = d.target("sacrum")
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    assert step.max() < 0.08  # m per 1/30 s: no jumps
+    end_dir = p[-1] - p[-20]
+    assert end_dir[1] > 0.4 and abs(end_dir[0]) < 0.25 * end_dir[1]
+    start_dir = p[20] - p[0]
+    assert start_dir[0] > 0.4 and abs(start_dir[1]) < 0.25 * start_dir[0]
