@@ -262,9 +262,9 @@ def make_character(preset: str = "adult_male", height: float | None = None, mass
         return idx
 
     abdomen = joint("waist", pelvis, (0, 0, L["pelvis"]),
-                    [("waist_flex", nY), ("waist_lat", X), ("waist_twist", Z)], "abdomen")
-    thorax = joint("chest", abdomen, (0, 0, L["abdomen"]), [("chest_flex", nY)], "thorax")
-    joint("neck", thorax, (0, 0, L["thorax"]), [("neck_flex", nY)], "head")
+                    [("waist_flex", Y), ("waist_lat", X), ("waist_twist", Z)], "abdomen")
+    thorax = joint("chest", abdomen, (0, 0, L["abdomen"]), [("chest_flex", Y)], "thorax")
+    joint("neck", thorax, (0, 0, L["thorax"]), [("neck_flex", Y)], "head")
 
     for side, s in (("l", 1.0), ("r", -1.0)):
         sX = X if s > 0 else nX

@@ -183,3 +183,30 @@ def test_joint_limits_and_modifiers(adult):
     loaded = adult.with_extra_mass("palm_r", 10.0)
     assert loaded.total_mass == pytest.approx(adult.total_mass + 10.0)
     assert loaded.fingerprint() != adult.fingerprint() and character().fingerprint() == adult.fingerprint()
+
+
+# Anatomical sign conventions: a positive angle moves the named handle the stated way
+# (world axes at the standing pose; +X forward, +Y left, +Z up).
+SIGNS = [
+    ("waist_flex", "head", 0, +1), ("chest_flex", "head", 0, +1), ("neck_flex", "head_top", 0, +1),
+    ("hip_flex_l", "knee_l", 0, +1), ("hip_flex_r", "knee_r", 0, +1),
+    ("hip_abd_l", "ankle_l", 1, +1), ("hip_abd_r", "ankle_r", 1, -1),
+    ("knee_flex_l", "ankle_l", 0, -1), ("ankle_flex_l", "toe_l", 2, +1), ("toe_flex_l", "toe_l", 2, +1),
+    ("shoulder_flex_l", "elbow_l", 0, +1), ("shoulder_abd_l", "elbow_l", 1, +1), ("shoulder_abd_r", "elbow_r", 1, -1),
+    ("elbow_flex_l", "wrist_l", 0, +1),
+]
+
+
+@pytest.mark.parametrize("dof, handle, axis, sign", SIGNS)
+def test_positive_angles_move_the_body_anatomically(dof, handle, axis, sign):
+    import numpy as np
+    from scenegraph.body import make_character, standing_pose
+    from scenegraph.kinematics import handle_positions_fn
+
+    ch = make_character()
+    f = handle_positions_fn(ch, (handle,))
+    q = standing_pose(ch)
+    before = np.asarray(f(q)).ravel()
+    q[ch.dof_index(dof)] += 0.2
+    after = np.asarray(f(q)).ravel()
+    assert np.sign(after[axis] - before[axis]) == sign
