@@ -61,6 +61,13 @@ __all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style"
 D_WEIGHT = 1.0e4  # paper: w in Eq. 18
 N_THETA_FULL = 5 * N_JOINT + 2  # 147
 LAM_REG = 1e-3  # the solver's λ regularisation (kept for a well-posed contact split)
+# IPOPT options of a counterexample solve: start *at* the warm start (X_T or the previous
+# counterexample, with its NNLS contact coefficients) instead of being pushed off the active
+# bounds λ = 0 by the default barrier (mu_init = 0.1, bound_push = 1e-2).
+WARM_START = (("warm_start_init_point", "yes"), ("mu_init", 1e-4),
+              ("warm_start_bound_push", 1e-6), ("warm_start_bound_frac", 1e-6),
+              ("warm_start_slack_bound_push", 1e-6), ("warm_start_slack_bound_frac", 1e-6),
+              ("warm_start_mult_bound_push", 1e-6))
 
 
 def joint_rms_deg(a: Motion, b: Motion, fps: float = 30.0) -> float:
@@ -169,10 +176,13 @@ class NIO:
     """
 
     def __init__(self, ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *,
-                 solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4):
+                 solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4,
+                 ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3):
         self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
+        self.feas_tol = feas_tol  # m: a counterexample must satisfy C to this tolerance
         self.sp = Subproblem(ch, default_style(ch.total_mass), target, self.footsteps, free=frozenset({"q"}),
-                             collocation_hz=collocation_hz, max_iter=solve_iter, tol=tol, label="nio")
+                             collocation_hz=collocation_hz, max_iter=solve_iter, tol=tol, label="nio",
+                             ipopt_options=tuple(ipopt_options))
         t = _time.perf_counter()
         self.built: Built = build(self.sp)
         self.build_seconds = _time.perf_counter() - t
@@ -240,9 +250,23 @@ class NIO:
                 lam[sl.start - off:sl.stop - off] = lk
         return F, lam
 
-    def energy(self, theta: np.ndarray, motion: Motion, F: np.ndarray) -> tuple[float, np.ndarray]:
+    def energy(self, theta: np.ndarray, motion: Motion, F: np.ndarray,
+               lam: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+        """E(X; θ) for motion q and forces F, and ∂E/∂θ.  With ``lam`` (the contact
+        coefficients of F) the solver's λ regularisation (OBJ_SCALE·LAM_REG)² |λ|² is added:
+        that is the objective the spacetime solver minimises, so X_T is a minimum of this
+        measure under θ* (without it, E(X_T; θ*) is not minimal and G(θ*) > 0)."""
         E, g = self._energy_fn(theta, *self.states(motion), F)
-        return float(E), np.asarray(g).ravel()
+        E = float(E)
+        if lam is not None:
+            E += float((OBJ_SCALE * LAM_REG) ** 2 * np.sum(np.asarray(lam) ** 2))
+        return E, np.asarray(g).ravel()
+
+    def measure(self, theta: np.ndarray, motion: Motion):
+        """(E, ∂E/∂θ, F, λ) of ``motion`` under θ with its energy-optimal contact forces."""
+        F, lam = self.forces(motion, theta)
+        E, g = self.energy(theta, motion, F, lam)
+        return E, g, F, lam
 
     # --- counterexample -------------------------------------------------------------------
     def counterexample(self, theta: np.ndarray, start: Motion | None = None,
@@ -274,19 +298,17 @@ class NIO:
         honest lower bound of Eq. 17 even when IPOPT stops early or wanders off.
         """
         theta = np.asarray(theta, float)
-        FT, lamT = self.forces(self.target, theta)
-        ET, gT = self.energy(theta, self.target, FT)
+        ET, gT, FT, lamT = self.measure(theta, self.target)
         best = (ET, gT, self.target, FT, lamT)
         for m in candidates:
-            F, lam = self.forces(m, theta)
-            E, g = self.energy(theta, m, F)
+            E, g, F, lam = self.measure(theta, m)
             if np.isfinite(E) and E < best[0]:
                 best = (E, g, m, F, lam)
         res = self.counterexample(theta, best[2], best[4])
         XS = res.motion
-        FS, lamS = self.forces(XS, theta)
-        ES, gS = self.energy(theta, XS, FS)
-        if np.isfinite(ES) and ES < best[0]:
+        ES, gS, FS, lamS = self.measure(theta, XS)
+        feasible = max(res.violations.values(), default=0.0) <= self.feas_tol
+        if feasible and np.isfinite(ES) and ES < best[0]:
             best = (ES, gS, XS, FS, lamS)
         ES, gS, XS, FS, _ = best
         D, gD = d_penalty(theta)

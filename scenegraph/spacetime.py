@@ -122,6 +122,7 @@ class Subproblem:
     max_iter: int = 300
     tol: float = 1e-4
     label: str = "step"
+    ipopt_options: tuple = ()  # extra IPOPT options as (name, value) pairs (e.g. warm starts in NIO)
 
 
 @dataclass
@@ -473,6 +474,7 @@ def build(sp: Subproblem) -> Built:
         "ipopt": {"print_level": int(_os.environ.get("COMPOSE_IPOPT_PRINT", "0")), "max_iter": sp.max_iter, "tol": sp.tol, "acceptable_tol": 1e-4,
                   "acceptable_iter": 5, "mu_strategy": "adaptive", "linear_solver": "mumps", "sb": "yes"},
     }
+    opts["ipopt"].update(dict(sp.ipopt_options))
     solver = ca.nlpsol("spacetime", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
 
     th = theta_kernel_vector(sp.style)
