@@ -231,6 +231,13 @@ def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     return mask
 
 
+def _depends_on_free(n_ctrl: int, s: float, mask: np.ndarray, other_free: bool) -> bool:
+    """Whether a kinematic constraint at canonical time s can change: some control point
+    under s is free (or another block it depends on is).  Constraints that depend on held
+    values only are not constraints of this step (outside a window they are constants)."""
+    return other_free or bool(np.any(mask[np.abs(basis(n_ctrl, [s])[0]) > 1e-12]))
+
+
 def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     """Uniform points in s at ``hz`` plus every contact interval's ends (so a footprint holds
     exactly from touch-down to lift-off); uniform points too close to an end are dropped."""
@@ -304,7 +311,8 @@ def build(sp: Subproblem) -> Built:
             for k in ks:
                 planted.append((handle, int(k), xy, si))
             for v in s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]:
-                pins.append((handle, float(v), xy))
+                if _depends_on_free(K, v, mask, warp_free or pos is not None):
+                    pins.append((handle, float(v), xy))
     n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
     xL = ca.MX.sym("L", n_lam)
     V = friction_basis()
@@ -410,6 +418,7 @@ def build(sp: Subproblem) -> Built:
             rho_extra.append(np.sqrt(sp.soft_pin_weight / len(soft)) * ca.vertcat(*rows))
     s_gnd = s_con if sp.ground_hz <= 0 else \
         np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])
+    s_gnd = np.array([v for v in s_gnd if _depends_on_free(K, v, mask, warp_free)])
     HPc = hk.map(len(s_gnd))(ca.mtimes(_sparse(basis(K, s_gnd, 0)), P).T)
     ground = ca.vertcat(*[HPc[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
     add("penetration", ground, 0.0, np.inf, "ineq")
@@ -418,7 +427,8 @@ def build(sp: Subproblem) -> Built:
     dl = HP[3 * hk_names.index("ankle_l"):3 * hk_names.index("ankle_l") + 2, :] - \
         HP[3 * hk_names.index("ankle_r"):3 * hk_names.index("ankle_r") + 2, :]
     lateral = -ca.sin(yaw) * dl[0, :] + ca.cos(yaw) * dl[1, :]
-    add("feet_crossing", lateral, sp.min_foot_separation, np.inf, "ineq")
+    live = [k for k in range(N) if _depends_on_free(K, s[k], mask, warp_free)]
+    add("feet_crossing", lateral[live], sp.min_foot_separation, np.inf, "ineq")
     if sp.cyclic:  # thesis §2.2.2: the cycle ends where it began, moved along the ground
         qs, qe = ca.mtimes(_sparse(basis(K, [0.0], 0)), P).T, ca.mtimes(_sparse(basis(K, [1.0], 0)), P).T
         vs = ca.mtimes(_sparse(basis(K, [0.0], 1)), P).T / ca.mtimes(_sparse(basis(nW, [0.0], 1)), warp)
