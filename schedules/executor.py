@@ -277,7 +277,8 @@ def _record(index: int, step: Step, data: dict) -> StepRecord:
             viol[k] = max(viol.get(k, 0.0), v)
     pre = {w: c["presolve"] for w, c in chars.items() if c["presolve"]}
     return StepRecord(index, step.id, step.kind, step.cycle, step.characters,
-                      statuses[0] if len(set(statuses)) == 1 else ";".join(statuses),
+                      ("discarded: " if data.get("discarded") else "")
+                      + (statuses[0] if len(set(statuses)) == 1 else ";".join(statuses)),
                       all(c["success"] for c in chars.values()), sum(c["iterations"] for c in chars.values()),
                       sum(c["seconds"] for c in chars.values()), float(sum(c["energy"] for c in chars.values())),
                       viol, pre or None,
@@ -426,7 +427,13 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                 # policy: a timing step is a warm start for the full step after it; one that ran out
                 # of iterations with every hard constraint satisfied is accepted (its status is kept)
                 accepted = rec.success or (s.kind != FULL and rec.status == "Maximum_Iterations_Exceeded")
-                if not accepted or bad:
+                if s.kind != FULL and (not accepted or bad):
+                    # a timing step that leaves constraints violated is no warm start: discard it,
+                    # the full step after it starts from the state before it (reported as such)
+                    d["discarded"] = True
+                    print(f"    {s.id}: timing result discarded ({rec.status}; "
+                          + ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items())) + ")", file=log, flush=True)
+                elif not accepted or bad:
                     groups = ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items(), key=lambda kv: -kv[1])) \
                         or "none above tolerance"
                     raise StepFailed(f"step {s.id!r} failed: IPOPT status {rec.status} after {rec.iterations} "
@@ -441,7 +448,8 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                     os._exit(STOP_EXIT)
             for s in gen:  # merge in the deterministic order
                 d = results[s.id]
-                scene = _apply(scene, d)
+                if not d.get("discarded"):
+                    scene = _apply(scene, d)
                 records[index[s.id]] = _record(index[s.id], s, d)
                 if s.kind == FULL:
                     for who, c in d["characters"].items():
