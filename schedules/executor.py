@@ -239,11 +239,18 @@ def _apply(scene: Scene, data: dict) -> Scene:
     for who, d in data["characters"].items():
         old = scene.character(who)
         ctrl = np.asarray(d["ctrl"], float)
-        if d["mask"] is not None:  # merge: only the window's control points
+        steps = tuple(d["footsteps"])
+        if d["mask"] is not None:  # merge: only the window's control points ...
             merged = np.array(old.motion.ctrl, float)
             merged[d["mask"]] = ctrl[d["mask"]]
             ctrl = merged
-        scene = scene.with_motion(who, Motion(ctrl, np.asarray(d["warp"], float)), tuple(d["footsteps"]))
+            # ... and only the footprints this step could move (steps of one generation start
+            # from the same snapshot: the others' footprints must not be reset to it)
+            win = d.get("window")
+            if win is not None and len(steps) == len(old.footsteps):
+                steps = tuple(n if (n.t0 >= win[0] - 1e-6 and n.t1 <= win[1] + 1e-6) else o
+                              for o, n in zip(old.footsteps, steps))
+        scene = scene.with_motion(who, Motion(ctrl, np.asarray(d["warp"], float)), steps)
     return scene
 
 
