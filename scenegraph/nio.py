@@ -52,7 +52,7 @@ from .dynamics import friction_basis
 from .footsteps import Footstep
 from .motion import Motion
 from .spacetime import (FORCE_HANDLES, OBJ_SCALE, W_ROOT, Built, Result, Subproblem, build,
-                        residual_kernel, solve)
+                        residual_kernel, solve, violations)
 from .style import Provenance, Style, default_style
 
 __all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style", "joint_rms_deg",
@@ -129,6 +129,52 @@ def _force_jacobian(ch: Character) -> ca.Function:
     return ca.Function("dQdf", [q, qd, qdd, f, th], [Q, ca.jacobian(Q, f)])
 
 
+class _BestIterate(ca.Callback):
+    """IPOPT iteration callback keeping the lowest-objective iterate that satisfies the
+    constraints to ``tol``: IPOPT is not monotone in the objective, and a counterexample
+    solve that stops at its iteration limit can end worse than it began."""
+
+    def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray, tol: float):
+        ca.Callback.__init__(self)
+        self.nx, self.ng, self.lbg, self.ubg, self.tol = nx, ng, lbg, ubg, tol
+        self.reset()
+        self.construct("nio_best_iterate", {})
+
+    def reset(self):
+        self.best_f, self.best_x = np.inf, None
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        n = ca.nlpsol_out(i)
+        if n == "f":
+            return ca.Sparsity.scalar()
+        if n in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if n in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        f = float(arg[1])
+        if f < self.best_f:
+            g = np.asarray(arg[2]).ravel()
+            viol = float(np.max(np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0), initial=0.0))
+            if viol <= self.tol:
+                self.best_f, self.best_x = f, np.asarray(arg[0]).ravel().copy()
+        return [0]
+
+
 @dataclass
 class IterationRecord:
     iteration: int
@@ -177,14 +223,22 @@ class NIO:
 
     def __init__(self, ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *,
                  solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4,
-                 ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3):
+                 ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3, rounds: int = 1):
         self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
+        self.verbose = False
+        self.rounds = rounds  # a counterexample = `rounds` solves of solve_iter iterations, each
+        # restarted from the best feasible motion so far (IPOPT's last iterate can be worse)
         self.feas_tol = feas_tol  # m: a counterexample must satisfy C to this tolerance
         self.sp = Subproblem(ch, default_style(ch.total_mass), target, self.footsteps, free=frozenset({"q"}),
                              collocation_hz=collocation_hz, max_iter=solve_iter, tol=tol, label="nio",
                              ipopt_options=tuple(ipopt_options))
         t = _time.perf_counter()
         self.built: Built = build(self.sp)
+        # rebuild with an iteration callback that keeps the best feasible iterate
+        b = self.built
+        self._best = _BestIterate(b.x0.size, b.lbg.size, b.lbg, b.ubg, 0.5 * feas_tol)
+        self.sp = replace(self.sp, nlpsol_options=(("iteration_callback", self._best),))
+        self.built = build(self.sp)
         self.build_seconds = _time.perf_counter() - t
         b = self.built
         s = b.s_points
@@ -285,7 +339,15 @@ class NIO:
         if lam0 is not None:
             x0[b.lam_slice] = lam0
         t = _time.perf_counter()
-        res = solve(self.sp, replace(b, p=p, x0=x0))
+        self._best.reset()
+        bb = replace(b, p=p, x0=x0)
+        res = solve(self.sp, bb)
+        if self._best.best_x is not None and self._best.best_f < res.objective:
+            # IPOPT ended above its best feasible iterate: use that one
+            x = self._best.best_x
+            P, W = (np.asarray(v, float) for v in b.unpack(x, p)[:2])
+            res = replace(res, motion=Motion(P, W.ravel()), objective=float(self._best.best_f),
+                          violations=violations(bb, x), status=res.status + "+best_iterate")
         self.solve_seconds += _time.perf_counter() - t
         self.n_solves += 1
         return res
@@ -304,20 +366,178 @@ class NIO:
             E, g, F, lam = self.measure(theta, m)
             if np.isfinite(E) and E < best[0]:
                 best = (E, g, m, F, lam)
-        res = self.counterexample(theta, best[2], best[4])
-        XS = res.motion
-        ES, gS, FS, lamS = self.measure(theta, XS)
-        feasible = max(res.violations.values(), default=0.0) <= self.feas_tol
-        if feasible and np.isfinite(ES) and ES < best[0]:
-            best = (ES, gS, XS, FS, lamS)
+        for _ in range(self.rounds):  # short solves chained from the best motion so far
+            res = self.counterexample(theta, best[2], best[4])
+            XS = res.motion
+            ES, gS, FS, lamS = self.measure(theta, XS)
+            feasible = max(res.violations.values(), default=0.0) <= self.feas_tol
+            if feasible and np.isfinite(ES) and ES < best[0]:
+                best = (ES, gS, XS, FS, lamS)
         ES, gS, XS, FS, _ = best
         D, gD = d_penalty(theta)
         return _Eval(theta, ET - ES, D, ET, ES, gT - gS + gD, XS, FS, res)
 
     # --- the learning loop ----------------------------------------------------------------
-    def run(self, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 2,
-            g_abs: float = 1e-4, trust: float = 0.1, min_beta: float = 1e-6,
-            callback: Callable[[IterationRecord], None] | None = None) -> NIOResult:
+    def run(self, theta0: np.ndarray, *, method: str = "bundle", **kw) -> NIOResult:
+        """Minimise G + D from θ0.  ``method``: "bundle" (default; trust-region cutting planes
+        built from the Eq. 21 gradients of every counterexample found so far) or "gradient"
+        (the paper's preconditioned gradient step with the halving line search)."""
+        if method == "gradient":
+            return self.run_gradient(theta0, **kw)
+        if method != "bundle":
+            raise ValueError(f"unknown NIO method {method!r}")
+        return self.run_bundle(theta0, **kw)
+
+    def _cut(self, theta: np.ndarray, motion: Motion, ET: float, gT: np.ndarray):
+        E, g, _, _ = self.measure(theta, motion)
+        return ET - E, gT - g
+
+    def _model_step(self, theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray):
+        """argmin over δ of max(0, max_i L_i + g_i·δ) + μ Σ|δ/s| subject to Σα = 1, the Style
+        bounds and the trust box |δ_j| ≤ radius·s_j (an LP).  Returns (θ + δ, model value)."""
+        from scipy.optimize import linprog
+
+        n = len(theta)
+        M = N_JOINT
+        lo = np.full(n, -np.inf)
+        hi = np.full(n, np.inf)
+        lo[:4 * M] = 0.0
+        hi[M:4 * M] = 1e5
+        lo[4 * M:5 * M], hi[4 * M:5 * M] = -np.pi, np.pi
+        lo[-2], hi[-2] = 0.0, 1e7
+        lo[-1], hi[-1] = 0.0, 0.1
+        dlo = np.maximum(lo - theta, -radius * scales)
+        dhi = np.minimum(hi - theta, radius * scales)
+        dlo = np.minimum(dlo, 0.0)
+        dhi = np.maximum(dhi, 0.0)
+        Lmax = max(c[0] for c in cuts)
+        mu = 1e-3 * max(Lmax, 1e-12) / max(radius, 1e-12) / n
+        # variables: δ (n), u (n) ≥ |δ/s|, t ≥ 0
+        cvec = np.r_[np.zeros(n), np.full(n, mu), 1.0]
+        rows, rhs = [], []
+        for L, g in cuts:
+            rows.append(np.r_[g, np.zeros(n), -1.0])
+            rhs.append(-L)
+        A1 = np.hstack([np.diag(1 / scales), -np.eye(n), np.zeros((n, 1))])
+        A2 = np.hstack([-np.diag(1 / scales), -np.eye(n), np.zeros((n, 1))])
+        A_ub = np.vstack([np.array(rows), A1, A2])
+        b_ub = np.r_[rhs, np.zeros(2 * n)]
+        A_eq = np.r_[np.ones(M), np.zeros(2 * n - M), 0.0][None, :]
+        b_eq = [1.0 - theta[:M].sum()]
+        bounds = list(zip(dlo, dhi)) + [(0, None)] * n + [(0, None)]
+        r = linprog(cvec, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
+        if r.status != 0:
+            return theta.copy(), Lmax
+        d = r.x[:n]
+        return theta + d, float(r.x[-1])
+
+    def run_bundle(self, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 3,
+                   g_abs: float = 1e-3, trust: float = 0.03, min_trust: float = 1e-3, max_trust: float = 4.0,
+                   max_cuts: int = 40, max_tries: int = 4, callback: Callable[[IterationRecord], None] | None = None) -> NIOResult:
+        """A trust-region cutting-plane (bundle) method on G + D.
+
+        Every counterexample X_i ever found is a motion satisfying C, so for every θ
+        G(θ) ≥ E(X_T; θ) − E(X_i; θ) =: L_i(θ) (and ≥ 0).  At the current θ_c each L_i is
+        linearised with its Eq. 21 gradient (AD, forces re-fitted by NNLS under θ_c); the
+        step minimises the model max(0, max_i L_i + g_i·δ) in the box |δ_j| ≤ r s_j (s: the
+        typical magnitudes), with Σα = 1 held exactly (so D = 0) — an LP.  The trial θ gets
+        its own counterexample (a spacetime solve warm-started from the best known motion),
+        which is added to the bundle.  G(θ_c) itself is re-read with every new counterexample
+        (a later solve can show that the current G was underestimated), and the trial is
+        accepted when G + D is below that; r doubles when the decrease was ≥ half the model's
+        prediction, else r halves (the halving of footnote 3) and the enriched model is
+        re-solved (at most ``max_tries`` trials per iteration).  The returned g_initial and
+        g_final are G at θ0 and at the result re-read with all counterexamples found.
+        """
+        t_start = _time.perf_counter()
+        th = _project(np.asarray(theta0, float))
+        a = np.maximum(th[:N_JOINT], 0)
+        th[:N_JOINT] = a / a.sum()
+        scales = _theta_scales(style_from_theta(th))
+        cur = self.evaluate(th)
+        bundle: list[Motion] = [cur.motion_S] if cur.G > 0 else []
+        n_eval = 1
+        hist = [IterationRecord(0, cur.G, cur.D, cur.E_T, cur.E_S, 0.0, 1, _time.perf_counter() - t_start)]
+        if callback:
+            callback(hist[-1])
+        g0 = cur.G + cur.D
+        slow, fails, reason, r = 0, 0, "max_iter", trust
+        it = 0
+        for it in range(1, max_iter + 1):
+            if cur.G + cur.D <= g_abs * max(g0, 1e-300):
+                reason = f"G below {g_abs:g} x G_initial"
+                it -= 1
+                break
+            if not bundle:
+                reason = "no counterexample: the solver found no motion below E(X_T)"
+                it -= 1
+                break
+            ET, gT, _, _ = self.measure(cur.theta, self.target)
+            cuts = [self._cut(cur.theta, m, ET, gT) for m in bundle]
+            # G(θ_c) with everything known now (later counterexamples can reveal a larger G)
+            prev = max(0.0, max(c[0] for c in cuts)) + cur.D
+            tries = 0
+            accepted = False
+            while r >= min_trust and tries < max_tries:
+                th_new, model = self._model_step(cur.theta, cuts, r, scales)
+                pred = prev - model
+                if pred <= 1e-12 * max(prev, 1e-300):
+                    r *= 0.5
+                    continue
+                new = self.evaluate(th_new, tuple(bundle))
+                tries += 1
+                n_eval += 1
+                if new.G > 0:
+                    bundle.append(new.motion_S)
+                    bundle = bundle[-max_cuts:]
+                c_new = self._cut(cur.theta, new.motion_S, ET, gT)
+                prev = max(prev, c_new[0] + cur.D)
+                actual = prev - (new.G + new.D)
+                if self.verbose:
+                    print(f"    trial r={r:.3g}: G(θ_c)={prev:.5g} model={model:.5g} G(trial)={new.G + new.D:.5g}",
+                          flush=True)
+                if actual > 0:
+                    cur = new
+                    accepted = True
+                    r_used = r
+                    if actual >= 0.5 * pred:
+                        r = min(max_trust, 2 * r)
+                    break
+                r *= 0.5
+                cuts.append(c_new)
+            if not accepted:
+                rec = IterationRecord(it, prev - cur.D, cur.D, cur.E_T, cur.E_S, 0.0, tries, _time.perf_counter() - t_start)
+                hist.append(rec)
+                if callback:
+                    callback(rec)
+                fails += 1
+                r = max(r, 4 * min_trust)
+                if fails >= patience:
+                    reason = f"no decrease of G + D found in {patience} iterations"
+                    break
+                continue
+            fails = 0
+            rec = IterationRecord(it, cur.G, cur.D, cur.E_T, cur.E_S, r_used, tries, _time.perf_counter() - t_start)
+            hist.append(rec)
+            if callback:
+                callback(rec)
+            rel = (prev - (cur.G + cur.D)) / max(prev, 1e-300)
+            slow = slow + 1 if rel < rtol else 0
+            if slow >= patience:
+                reason = f"relative decrease < {rtol} for {patience} iterations"
+                break
+        # G(θ0) re-read with every counterexample found: the first solve alone can underestimate it
+        ET0, gT0, _, _ = self.measure(th, self.target)
+        g_init = max([hist[0].G] + [self._cut(th, m, ET0, gT0)[0] for m in bundle])
+        ET1, gT1, _, _ = self.measure(cur.theta, self.target)
+        g_fin = max([0.0] + [self._cut(cur.theta, m, ET1, gT1)[0] for m in bundle])
+        return NIOResult(style_from_theta(cur.theta), cur.theta, hist, g_init, g_fin,
+                         sum(1 for h in hist[1:] if h.beta > 0), n_eval, _time.perf_counter() - t_start,
+                         reason, cur.motion_S)
+
+    def run_gradient(self, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 2,
+                     g_abs: float = 1e-4, trust: float = 0.1, min_beta: float = 1e-6,
+                     callback: Callable[[IterationRecord], None] | None = None) -> NIOResult:
         t_start = _time.perf_counter()
         scales = _theta_scales(style_from_theta(theta0))
         cur = self.evaluate(_project(np.asarray(theta0, float)))

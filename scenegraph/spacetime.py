@@ -123,6 +123,7 @@ class Subproblem:
     tol: float = 1e-4
     label: str = "step"
     ipopt_options: tuple = ()  # extra IPOPT options as (name, value) pairs (e.g. warm starts in NIO)
+    nlpsol_options: tuple = ()  # extra CasADi nlpsol options as (name, value) pairs (e.g. iteration_callback)
 
 
 @dataclass
@@ -485,6 +486,7 @@ def build(sp: Subproblem) -> Built:
                   "acceptable_iter": 5, "mu_strategy": "adaptive", "linear_solver": "mumps", "sb": "yes"},
     }
     opts["ipopt"].update(dict(sp.ipopt_options))
+    opts.update(dict(sp.nlpsol_options))
     solver = ca.nlpsol("spacetime", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
 
     th = theta_kernel_vector(sp.style)

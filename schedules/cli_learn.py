@@ -58,8 +58,34 @@ def _to_spacetime_steps(ch, steps, t0: float, t1: float):
     return tuple(sorted(out, key=lambda f: f.t0))
 
 
-def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz: float = 10.0):
-    """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B)."""
+def _steps_on_motion(ch, motion, steps):
+    """Footsteps re-placed where ``motion`` puts the feet: per step the mean ball position and
+    heel→ball heading over its planted interval (the detected positions come from the raw
+    clip, and a reconstruction that misses them by centimetres is far from C)."""
+    from dataclasses import replace
+
+    from scenegraph.footsteps import contact_points
+    from scenegraph.spacetime import handles_kernel
+
+    out = []
+    for st in steps:
+        names = (f"heel_{st.foot}", f"ball_{st.foot}")
+        hk = handles_kernel(ch, names)
+        spans = [ab for _, ab, _ in contact_points(ch, st)]
+        t = np.linspace(min(a for a, _ in spans), max(b for _, b in spans), 9)
+        q = motion.canonical(motion.to_canonical(t))
+        P = np.array([np.asarray(hk(qi)).ravel() for qi in q])  # (9, 6)
+        heel, ball = P[:, 0:2].mean(axis=0), P[:, 3:5].mean(axis=0)
+        d = ball - heel
+        out.append(replace(st, position=(float(ball[0]), float(ball[1])),
+                           heading=float(np.arctan2(d[1], d[0]))))
+    return tuple(out)
+
+
+def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz: float = 10.0,
+                reconstruct: bool = True):
+    """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B); X_T is
+    the smooth reconstruction (Appendix A) unless ``reconstruct`` is False (spline fit)."""
     from scenegraph.contacts import detect_footsteps
     from scenegraph.mocap import load_clip
     from scenegraph.motion import Motion
@@ -69,11 +95,17 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
         raise InputError(f"no such clip file: {path}")
     clip = load_clip(p, frames=frames, preset=body)
     times = np.asarray(clip.times, float)
-    motion = Motion.from_samples(times, np.asarray(clip.q, float),
-                                 n_ctrl=max(6, int(round((times[-1] - times[0]) * ctrl_hz)) + 3))
+    if reconstruct:  # Appendix A: smooth, root residual softly zero
+        from scenegraph.mocap import reconstruct_clip
+
+        motion = reconstruct_clip(clip, ctrl_hz=ctrl_hz).motion
+    else:
+        motion = Motion.from_samples(times, np.asarray(clip.q, float),
+                                     n_ctrl=max(6, int(round((times[-1] - times[0]) * ctrl_hz)) + 3))
     steps = _to_spacetime_steps(clip.character, detect_footsteps(clip), times[0], times[-1])
     if not steps:
         raise InputError(f"{path} frames {frames[0]}:{frames[1]}: no foot contacts detected")
+    steps = _steps_on_motion(clip.character, motion, steps)
     return clip.character, motion, steps, clip
 
 

@@ -92,27 +92,53 @@ def test_cli_learn_bad_input(tmp_path):
     assert not out.exists()
 
 
+def _theta_star(d):
+    rng = np.random.default_rng(0)
+    a = d.alpha * np.exp(rng.normal(0, 0.5, N_JOINT))
+    return d.with_(alpha=a / a.sum(), ks1=d.ks1 * 1.5, ks2=d.ks2 * 0.7, name="star")
+
+
 @pytest.mark.slow
 def test_synthetic_recovery():
-    """X_T synthesised with a known θ* (α perturbed, springs ×1.5 / ×0.7); NIO from the
-    default style.  Asserted: G never increases and falls; the learned style is valid.
-    The issue's targets (G ÷ 100, re-synthesis RMS ≤ 2°) are checked separately below and
-    are NOT met yet within this test's budget (see the NIO report)."""
+    """X_T synthesised with a known θ* (α perturbed, springs ×1.5 / ×0.7), then refined at θ*
+    by a warm-started 300-iteration solve (the synthesis stops at IPOPT's dual tolerance far
+    above the optimum: a later solve at θ* itself lowers E(X_T) 0.358 → 0.042, so without the
+    refinement G(θ*) > G(default)).  NIO from the default style.
+
+    Asserted (what is achieved): G(θ*) ≤ 5 % of G(default) (X_T is hardly beaten at θ*), G(default) > 0
+    (the counterexample beats X_T), G at the result (re-read with every counterexample) is
+    below G at the start and the learned style is valid.  The issue's targets (G ÷ 100, re-synthesis RMS ≤ 2°) are NOT met: the
+    printed line reports the gap."""
     from scenegraph.synthesis import synthesize
 
     ch = make_character("adult_male")
     d = default_style(ch.total_mass)
-    rng = np.random.default_rng(0)
-    a = d.alpha * np.exp(rng.normal(0, 0.5, N_JOINT))
-    star = d.with_(alpha=a / a.sum(), ks1=d.ks1 * 1.5, ks2=d.ks2 * 0.7, name="star")
+    star = _theta_star(d)
     fs = footsteps_for_walk(n_steps=3)
-    XT = synthesize(ch, star, fs, 0.0, 1.3).result.motion
-    nio = NIO(ch, XT, fs, solve_iter=80)
+    X0 = synthesize(ch, star, fs, 0.0, 1.3).result.motion
+    ref = NIO(ch, X0, fs, solve_iter=300)
+    th_star = star.vector()
+    XT = X0
+    for _ in range(2):
+        XT = ref.counterexample(th_star, XT, ref.forces(XT, th_star)[1]).motion
+    assert ref.measure(th_star, XT)[0] < 0.5 * ref.measure(th_star, X0)[0]
+
+    nio = NIO(ch, XT, fs, solve_iter=60)
+    g_star = nio.evaluate(th_star).G  # the floor: how well the solver can still beat X_T at θ*
+    th0 = d.vector()
+    th0[:N_JOINT] /= th0[:N_JOINT].sum()
     hist = []
-    out = nio.run(d.vector(), max_iter=4, callback=hist.append)
-    Gs = [h.G + h.D for h in hist if h.beta > 0 or h.iteration == 0]
-    assert all(b <= a + 1e-12 for a, b in zip(Gs, Gs[1:]))
-    assert out.g_final + 0 <= out.g_initial
+    out = nio.run(th0, max_iter=30, callback=hist.append)
+    assert out.g_initial > 0
+    assert out.g_final < out.g_initial  # both re-read with every counterexample found
+    assert g_star <= 0.05 * out.g_initial
     assert abs(out.style.alpha.sum() - 1) < 1e-9
-    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} ({out.stop_reason}); "
-          f"rms(X_S, X_T) = {joint_rms_deg(out.counterexample, XT):.2f} deg")
+
+    # re-synthesis: a 300-iteration solve warm-started at X_T under each style
+    rms = {}
+    for name, th in (("learned", out.theta), ("default", th0), ("star", th_star)):
+        m = ref.counterexample(th, XT, ref.forces(XT, th)[1]).motion
+        rms[name] = joint_rms_deg(m, XT)
+    print("G per iteration:", [f"{h.G:.4g}" for h in hist], f"G(theta*) = {g_star:.3g}")
+    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} (ratio {out.g_final / out.g_initial:.3g}, {out.stop_reason}); "
+          f"resynth rms deg: " + ", ".join(f"{k} {v:.2f}" for k, v in rms.items()))

@@ -1,6 +1,6 @@
 """Benchmark: learn the walk style from one gait cycle of CMU 07_01 by NIO, then re-synthesise.
 
-    python tests/benchmarks/bench_nio.py [--frames 1:140] [--max-iter 10] [--out scenarios/styles/walk.yaml]
+    python tests/benchmarks/bench_nio.py [--frames 64:201] [--max-iter 10] [--out scenarios/styles/walk.yaml]
 
 Re-synthesis: a motion with the clip's own footprints (initialised from the clip), with the
 learned style, the default style and the learned style with springs off (paper §7
@@ -29,7 +29,7 @@ CLIP = ROOT / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--frames", default="1:140")
+    ap.add_argument("--frames", default="64:201")
     ap.add_argument("--max-iter", type=int, default=10)
     ap.add_argument("--out", default=None, help="also write the learned style here")
     args = ap.parse_args()
