@@ -343,8 +343,12 @@ def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> None:
 
 
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
-                 jobs: int = 1, resume: bool = False, log=sys.stderr) -> RunResult:
-    """Run every Step of ``schedule`` over ``scene``; see the module docstring."""
+                 jobs: int = 1, resume: bool = False, strict: bool = False, log=sys.stderr) -> RunResult:
+    """Run every Step of ``schedule`` over ``scene``; see the module docstring.
+
+    ``strict``: a full step must converge; otherwise one that reached its iteration cap with
+    every hard constraint satisfied is kept (feasible, not proven optimal; its status stays
+    in the report and a warning line is printed)."""
     run_dir = Path(run_dir)
     prepare_run_dir(run_dir, fingerprint, resume)
     order = schedule.order()
@@ -433,7 +437,11 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                 bad = _hard_violations(rec.violations)
                 # policy: a timing step is a warm start for the full step after it; one that ran out
                 # of iterations with every hard constraint satisfied is accepted (its status is kept)
-                accepted = rec.success or (s.kind != FULL and rec.status == "Maximum_Iterations_Exceeded")
+                capped = rec.status == "Maximum_Iterations_Exceeded"
+                accepted = rec.success or (capped and (s.kind != FULL or not strict))
+                if s.kind == FULL and capped and accepted and not bad:
+                    print(f"    warning: {s.id} reached its iteration cap; kept as feasible, not converged",
+                          file=log, flush=True)
                 if s.kind != FULL and (not accepted or bad):
                     # a timing step that leaves constraints violated is no warm start: discard it,
                     # the full step after it starts from the state before it (reported as such)
