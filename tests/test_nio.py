@@ -101,26 +101,37 @@ def _theta_star(d):
 @pytest.mark.slow
 def test_synthetic_recovery():
     """X_T synthesised with a known θ* (α perturbed, springs ×1.5 / ×0.7), then refined at θ*
-    by a warm-started 300-iteration solve (the synthesis stops at IPOPT's dual tolerance far
+    by two warm-started 300-iteration solves (the synthesis stops at IPOPT's dual tolerance far
     above the optimum: a later solve at θ* itself lowers E(X_T) 0.358 → 0.042, so without the
-    refinement G(θ*) > G(default)).  NIO from the default style.
+    refinement G(θ*) > G(default)).  NIO (bundle method, 60-iteration counterexamples) from the
+    default style.
 
-    Asserted (what is achieved): G(θ*) ≤ 5 % of G(default) (X_T is hardly beaten at θ*), G(default) > 0
-    (the counterexample beats X_T), G at the result (re-read with every counterexample) is
-    below G at the start and the learned style is valid.  The issue's targets (G ÷ 100, re-synthesis RMS ≤ 2°) are NOT met: the
-    printed line reports the gap."""
+    Asserted (what is achieved): G(θ*) ≤ 5 % of G(default) (X_T is hardly beaten at θ*),
+    G(default) > 0 (the counterexample beats X_T), G falls ≥ 100× (both ends re-read with every
+    counterexample found) and the learned style is valid.
+    Measured (2026-11-22): G 0.0274 → 3.5e-6 (ratio 1.3e-4) in 15 iterations, 26 solves, 139 s.
+    NOT achieved: recovery.  θ barely moves toward θ* (mean |log α/α*| 0.318 vs 0.334 at the
+    default; ks1/ks1* 0.80, ks2/ks2* 1.15) and the re-synthesis (the same pipeline as X_T) is
+    12.7° RMS from X_T with the learned style vs 11.9° with the default (target ≤ 2°): G → 0
+    means the 60-iteration solver no longer finds a counterexample, not that X_T is optimal.
+    The numbers are printed."""
     from scenegraph.synthesis import synthesize
 
     ch = make_character("adult_male")
     d = default_style(ch.total_mass)
     star = _theta_star(d)
     fs = footsteps_for_walk(n_steps=3)
+    def pipeline(style):  # synthesis, then two warm-started 300-iteration refinements
+        m = synthesize(ch, style, fs, 0.0, 1.3).result.motion
+        th = style.vector()
+        for _ in range(2):
+            m = ref.counterexample(th, m, ref.forces(m, th)[1]).motion
+        return m
+
+    th_star = star.vector()
     X0 = synthesize(ch, star, fs, 0.0, 1.3).result.motion
     ref = NIO(ch, X0, fs, solve_iter=300)
-    th_star = star.vector()
-    XT = X0
-    for _ in range(2):
-        XT = ref.counterexample(th_star, XT, ref.forces(XT, th_star)[1]).motion
+    XT = pipeline(star)
     assert ref.measure(th_star, XT)[0] < 0.5 * ref.measure(th_star, X0)[0]
 
     nio = NIO(ch, XT, fs, solve_iter=60)
@@ -134,11 +145,17 @@ def test_synthetic_recovery():
     assert g_star <= 0.05 * out.g_initial
     assert abs(out.style.alpha.sum() - 1) < 1e-9
 
-    # re-synthesis: a 300-iteration solve warm-started at X_T under each style
-    rms = {}
-    for name, th in (("learned", out.theta), ("default", th0), ("star", th_star)):
-        m = ref.counterexample(th, XT, ref.forces(XT, th)[1]).motion
-        rms[name] = joint_rms_deg(m, XT)
+    assert out.g_final <= 0.01 * out.g_initial  # the issue's "two orders of magnitude"
+
+    # re-synthesis: the pipeline that made X_T (same initial motion), with each style
+    rms = {name: joint_rms_deg(pipeline(st), XT) for name, st in (("learned", out.style), ("default", d))}
+    lr = np.log(out.style.alpha / star.alpha)
     print("G per iteration:", [f"{h.G:.4g}" for h in hist], f"G(theta*) = {g_star:.3g}")
-    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} (ratio {out.g_final / out.g_initial:.3g}, {out.stop_reason}); "
+    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} (ratio {out.g_final / out.g_initial:.3g}, {out.stop_reason}, "
+          f"{out.iterations} iterations, {out.evaluations} solves, {out.seconds:.0f} s); "
           f"resynth rms deg: " + ", ".join(f"{k} {v:.2f}" for k, v in rms.items()))
+    print(f"alpha mean |log(a/a*)|: learned {np.abs(lr).mean():.3f}, default "
+          f"{np.abs(np.log(d.alpha / star.alpha)).mean():.3f}; ks1/ks1* median "
+          f"{np.median(out.style.ks1 / np.maximum(star.ks1, 1e-9)):.3f}, ks2/ks2* median "
+          f"{np.median(out.style.ks2 / np.maximum(star.ks2, 1e-9)):.3f}")
+    assert np.isfinite(rms["learned"])  # the 2° target is not met (see the printed numbers)
