@@ -219,7 +219,9 @@ class Built:
 
 
 def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
-    """Control points free under the window: those whose support lies inside it (or meets it)."""
+    """Control points free under the window: those whose support lies inside it, so a
+    windowed solve never changes the motion (or invalidates contact forces) outside its
+    window; the points straddling two windows are freed by the seam window between them."""
     if sp.window is None:
         return np.ones(n_ctrl, bool)
     s0, s1 = sp.motion.to_canonical([sp.window[0], sp.window[1]])
@@ -228,7 +230,7 @@ def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     for i in range(n_ctrl):
         lo = knots[max(0, i - 3)]
         hi = knots[min(len(knots) - 1, i + 1)] if i + 1 < len(knots) else 1.0
-        mask[i] = (hi > s0 + 1e-9) and (lo < s1 - 1e-9)
+        mask[i] = (lo >= s0 - 1e-9) and (hi <= s1 + 1e-9)
     return mask
 
 

@@ -343,12 +343,12 @@ def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> None:
 
 
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
-                 jobs: int = 1, resume: bool = False, strict: bool = False, log=sys.stderr) -> RunResult:
+                 jobs: int = 1, resume: bool = False, accept_capped: bool = False, log=sys.stderr) -> RunResult:
     """Run every Step of ``schedule`` over ``scene``; see the module docstring.
 
-    ``strict``: a full step must converge; otherwise one that reached its iteration cap with
-    every hard constraint satisfied is kept (feasible, not proven optimal; its status stays
-    in the report and a warning line is printed)."""
+    A full step must converge.  With ``accept_capped`` one that reached its iteration cap
+    with every hard constraint satisfied is kept instead (feasible, not converged: its status
+    stays in the report and a warning line is printed; the audit tells how good it is)."""
     run_dir = Path(run_dir)
     prepare_run_dir(run_dir, fingerprint, resume)
     order = schedule.order()
@@ -438,7 +438,7 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                 # policy: a timing step is a warm start for the full step after it; one that ran out
                 # of iterations with every hard constraint satisfied is accepted (its status is kept)
                 capped = rec.status == "Maximum_Iterations_Exceeded"
-                accepted = rec.success or (capped and (s.kind != FULL or not strict))
+                accepted = rec.success or (capped and (s.kind != FULL or accept_capped))
                 if s.kind == FULL and capped and accepted and not bad:
                     print(f"    warning: {s.id} reached its iteration cap; kept as feasible, not converged",
                           file=log, flush=True)
