@@ -469,19 +469,22 @@ def build(sp: Subproblem) -> Built:
     lam_g = ca.MX.sym("lam_g", gg.shape[0])
     # Everything but the dynamics kernel is plain SX-expandable algebra: expanding those
     # parts makes their derivatives cheap scalar code instead of MX graph evaluation.
+    # (expand the plain functions first, then differentiate in SX: much cheaper to build)
     rho_x = ca.vertcat(*[OBJ_SCALE * ca.vec(r) for r in rho_extra])
+    xs, ps = ca.SX.sym("x", x.shape[0]), ca.SX.sym("p", p.shape[0])
     J_dyn = ca.jacobian(rho_dyn, x)
-    J_x = ca.Function("J_extra", [x, p], [ca.jacobian(rho_x, x)]).expand()(x, p)
+    rxs = ca.Function("rho_extra", [x, p], [rho_x]).expand()(xs, ps)
+    J_x = ca.Function("J_extra", [xs, ps], [ca.jacobian(rxs, xs)])(x, p)
+    gs = ca.Function("g_all", [x, p], [gg]).expand()(xs, ps)
     if gg.shape[0]:
-        lam_s = ca.MX.sym("lam_s", gg.shape[0])
-        hc_fn = ca.Function("H_con", [x, p, lam_s], [ca.hessian(ca.dot(lam_s, gg), x)[0]]).expand()
-        Hc = hc_fn(x, p, lam_g)
+        lam_s = ca.SX.sym("lam_s", gg.shape[0])
+        Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s, gs), xs)[0]])(x, p, lam_g)
     else:
         Hc = ca.MX(x.shape[0], x.shape[0])
     H = ca.triu(2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x)) + Hc)
     hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
-    jac_g = ca.Function("nlp_jac_g", [x, p], [gg, ca.jacobian(gg, x)], ["x", "p"], ["g", "jac_g_x"]).expand()
+    jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
     opts = {
         "hess_lag": hess, "jac_g": jac_g, "print_time": False,
         "ipopt": {"print_level": int(_os.environ.get("COMPOSE_IPOPT_PRINT", "0")), "max_iter": sp.max_iter, "tol": sp.tol, "acceptable_tol": 1e-4,
