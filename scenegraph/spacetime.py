@@ -118,6 +118,7 @@ class Subproblem:
     fix_start_time: bool = True
     fix_end_time: bool = True
     cyclic: bool = False
+    contact_guess: dict | None = field(default=None, compare=False, hash=False)  # warm start for λ
     min_foot_separation: float = 0.06
     max_iter: int = 300
     tol: float = 1e-4
@@ -239,6 +240,25 @@ def _depends_on_free(n_ctrl: int, s: float, mask: np.ndarray, other_free: bool) 
     under s is free (or another block it depends on is).  Constraints that depend on held
     values only are not constraints of this step (outside a window they are constants)."""
     return other_free or bool(np.any(mask[np.abs(basis(n_ctrl, [s])[0]) > 1e-12]))
+
+
+def _lambda_guess(sp: Subproblem, planted: list, s: np.ndarray, mg: float) -> np.ndarray:
+    """Initial contact coefficients: from ``sp.contact_guess`` (handle → (times, forces N),
+    e.g. the previous result's) by non-negative least squares, else a constant share."""
+    lam = np.full(4 * len(planted), 0.125)
+    if not sp.contact_guess:
+        return lam
+    from scipy.optimize import nnls
+    V = mg * friction_basis()
+    t = sp.motion.time(s)
+    for c, (handle, k, _, _) in enumerate(planted):
+        if handle in sp.contact_guess:
+            times, forces = sp.contact_guess[handle]
+            times = np.asarray(times)
+            if len(times) and np.min(np.abs(times - t[k])) < 0.02:
+                f = np.asarray(forces).reshape(-1, 3)[int(np.argmin(np.abs(times - t[k])))]
+                lam[4 * c:4 * c + 4] = nnls(V, f)[0]
+    return lam
 
 
 def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
@@ -451,7 +471,7 @@ def build(sp: Subproblem) -> Built:
     lbx = [np.tile(lo, K)[free_idx], np.full(xW.shape[0], -np.inf), [], np.zeros(n_lam)]
     ubx = [np.tile(hi, K)[free_idx], np.full(xW.shape[0], np.inf), [], np.full(n_lam, np.inf)]
     x0 = [ctrl0.ravel()[free_idx], np.asarray(m.warp, float) if warp_free else [], [],
-          np.full(n_lam, 0.25 / max(1, 2))]
+          _lambda_guess(sp, planted if n_lam else [], s, mg)]
     fp0 = []
     for si in free_steps:
         fp0 += list(sp.footsteps[si].position)
