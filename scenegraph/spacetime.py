@@ -320,21 +320,25 @@ def build(sp: Subproblem) -> Built:
     free_steps = [i for i, f in enumerate(sp.footsteps) if f.free and "footprints" in sp.free]
     xF = ca.MX.sym("F", 2 * len(free_steps))
 
-    # contacts: (handle, k) pairs planted by footsteps, λ per pair
-    planted = []  # (handle, k, target xy expr, step index): contact force at grid point k
-    pins = []  # (handle, s, target xy expr): footstep position constraints
-    for si, step in enumerate(sp.footsteps):
+    def planted_handles(si: int, step: Footstep):
+        """contact_points of a footstep, its position the NLP variable when it is free."""
         pos = None
         if si in free_steps:
             j = free_steps.index(si)
             pos = (xF[2 * j], xF[2 * j + 1])
-        for handle, (ta, tb), xy in contact_points(ch, step, pos):
+        return contact_points(ch, step, pos)
+
+    # contacts: (handle, k) pairs planted by footsteps, λ per pair
+    planted = []  # (handle, k, target xy expr, step index): contact force at grid point k
+    pins = []  # (handle, s, target xy expr): footstep position constraints
+    for si, step in enumerate(sp.footsteps):
+        for handle, (ta, tb), xy in planted_handles(si, step):
             sa, sb = m.to_canonical([ta, tb])
             ks = np.flatnonzero((s >= sa - 1e-9) & (s <= sb + 1e-9))
             for k in ks:
                 planted.append((handle, int(k), xy, si))
             for v in s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]:
-                if _depends_on_free(K, v, mask, warp_free or pos is not None):
+                if _depends_on_free(K, v, mask, warp_free or si in free_steps):
                     pins.append((handle, float(v), xy))
     n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
     xL = ca.MX.sym("L", n_lam)
@@ -425,12 +429,8 @@ def build(sp: Subproblem) -> Built:
         # keeps planted feet still between collocation points without degenerate constraints
         dense = np.linspace(0, 1, max(2, int(round(m.duration * sp.soft_pin_hz)) + 1))
         soft = []
-        for step_i, step in enumerate(sp.footsteps):
-            pos = None
-            if step_i in free_steps:
-                j = free_steps.index(step_i)
-                pos = (xF[2 * j], xF[2 * j + 1])
-            for handle, (ta, tb), xy in contact_points(ch, step, pos):
+        for si, step in enumerate(sp.footsteps):
+            for handle, (ta, tb), xy in planted_handles(si, step):
                 sa, sb = m.to_canonical([ta, tb])
                 for v in dense[(dense > sa) & (dense < sb)]:
                     soft.append((handle, float(v), xy))
