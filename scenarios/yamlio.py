@@ -18,7 +18,7 @@ from pydantic import BaseModel, ValidationError
 
 from .errors import InputError, Location
 
-__all__ = ["load_yaml", "parse_yaml", "validate", "load_model", "format_path", "dump_yaml_atomic"]
+__all__ = ["load_yaml", "parse_yaml", "read_text", "validate", "load_model", "format_path", "dump_yaml_atomic"]
 
 MAX_BYTES = 2_000_000
 _PLAIN_TAGS = {
@@ -88,21 +88,25 @@ def parse_yaml(text: str, file: str | None = None) -> tuple[Any, Positions]:
     return _construct(docs[0], file, (), positions), positions
 
 
-def load_yaml(path: str | os.PathLike) -> tuple[Any, Positions]:
-    """Read and parse a YAML file (at most 2 MB)."""
+def read_text(path: str | os.PathLike, kind: str, max_bytes: int) -> str:
+    """A UTF-8 input file's text; every failure is an InputError naming the file."""
     p = Path(path)
     try:
         size = p.stat().st_size
-        if size > MAX_BYTES:
-            raise InputError(f"file is {size} bytes, more than the {MAX_BYTES} allowed", Location(str(path)))
-        text = p.read_text(encoding="utf-8")
+        if size > max_bytes:
+            raise InputError(f"file is {size} bytes, more than the {max_bytes} allowed", Location(str(path)))
+        return p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError("file not found", Location(str(path))) from None
-    except UnicodeDecodeError:
-        raise InputError("file is not UTF-8 text", Location(str(path))) from None
     except IsADirectoryError:
-        raise InputError("is a directory, expected a YAML file", Location(str(path))) from None
-    return parse_yaml(text, str(path))
+        raise InputError(f"is a directory, expected a {kind} file", Location(str(path))) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"file is not UTF-8 text (byte {exc.start})", Location(str(path))) from None
+
+
+def load_yaml(path: str | os.PathLike) -> tuple[Any, Positions]:
+    """Read and parse a YAML file (at most 2 MB)."""
+    return parse_yaml(read_text(path, "YAML", MAX_BYTES), str(path))
 
 
 def _nearest(positions: Positions, path: tuple) -> tuple[tuple, tuple[int, int] | None]:

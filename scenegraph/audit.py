@@ -8,10 +8,9 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-import casadi as ca
 import numpy as np
 
-from .body import G, N_DOF, N_ROOT, Character
+from .body import G, N_ROOT, Character
 from .dynamics import MU
 from .footsteps import Footstep, contact_points
 from .kinematics import handle_positions_fn

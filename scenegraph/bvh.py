@@ -20,10 +20,10 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from scenarios.yamlio import read_text
 from scenarios.errors import InputError, Location
 
 __all__ = [
@@ -331,19 +331,7 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
 
 def read_bvh(path: str | os.PathLike) -> BvhFile:
     """Read and parse a BVH file."""
-    p = Path(path)
-    try:
-        size = p.stat().st_size
-        if size > MAX_BYTES:
-            raise InputError(f"file is {size} bytes, more than the {MAX_BYTES} allowed", Location(str(path)))
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("file not found", Location(str(path))) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a BVH file", Location(str(path))) from None
-    except UnicodeDecodeError as exc:
-        raise InputError(f"file is not UTF-8 text (byte {exc.start})", Location(str(path))) from None
-    return parse_bvh(text, str(path))
+    return parse_bvh(read_text(path, "BVH", MAX_BYTES), str(path))
 
 
 # --- quaternions (w, x, y, z) -------------------------------------------------------------

@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from .body import G, N_DOF, N_ROOT, Character
-from .kinematics import local_transform
+from .kinematics import frame_transforms, handle_position, local_transform
 
 __all__ = ["rnea", "external_generalized_force", "passive_force", "sigmoid", "friction_basis",
            "shoe_force", "muscle_and_residual", "MU", "ExternalForce", "gravity_vector", "mass_matrix"]
@@ -142,8 +142,6 @@ def muscle_and_residual(ch: Character, q, qd, qdd, style, ext: Sequence[External
 
     The shoe springs act at both heels and are added to ``ext`` here.
     """
-    R, p = None, None
-    from .kinematics import frame_transforms, handle_position
     tr = frame_transforms(ch, q)
     shoe = []
     for side in ("l", "r"):

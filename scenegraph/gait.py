@@ -29,13 +29,11 @@ def leg_phase(footsteps: tuple[Footstep, ...], foot: str, t: float) -> tuple[str
             return "stance", (t - f.t0) / (f.t1 - f.t0)
     prev = [f for f in steps if f.t1 < t]
     nxt = [f for f in steps if f.t0 > t]
-    other = [f for f in footsteps if f.foot != foot]
     typical_stance = np.mean([f.t1 - f.t0 for f in footsteps]) if footsteps else 0.6
     period = 2 * np.mean(np.diff(sorted(f.t0 for f in footsteps))) if len(footsteps) > 1 else 1.1
     swing = max(period - typical_stance, 0.2)
     t_off = prev[-1].t1 if prev else (nxt[0].t0 - swing if nxt else t)
     t_on = nxt[0].t0 if nxt else t_off + swing
-    del other
     return "swing", float(np.clip((t - t_off) / max(t_on - t_off, 1e-3), 0, 1))
 
 

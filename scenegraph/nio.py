@@ -44,14 +44,14 @@ from __future__ import annotations
 
 import functools
 import time as _time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import casadi as ca
 import numpy as np
 from scipy.optimize import nnls
 
-from .body import G, JOINT_DOF_NAMES, N_DOF, N_JOINT, N_ROOT, Character
+from .body import G, N_DOF, N_JOINT, N_ROOT, Character
 from .dynamics import friction_basis
 from .footsteps import Footstep
 from .motion import Motion

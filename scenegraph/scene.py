@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.errors import InputError
 from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachGoal, Scenario, StyleChangeGoal,
                               TackleGoal, WalkToGoal, joint_dofs)
 

@@ -216,7 +216,6 @@ class Built:
     lam_slice: slice
     free_steps: list
     g_fn: ca.Function
-    energy_fn: ca.Function
 
 
 def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
@@ -534,7 +533,7 @@ def build(sp: Subproblem) -> Built:
                                xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4))
                   for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
                  slice(xP.shape[0] + xW.shape[0] + xF.shape[0], x.shape[0]), free_steps,
-                 ca.Function("g", [x, p], [gg]), ca.Function("E", [x, p], [energy]))
+                 ca.Function("g", [x, p], [gg]))
 
 
 def violations(b: Built, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:
@@ -561,9 +560,8 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
     steps = list(sp.footsteps)
     for j, si in enumerate(b.free_steps):
-        steps[si] = replace(steps[si], position=(float(np.ravel(F)[2 * j]), float(np.ravel(F)[2 * j + 1])))
+        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
     viol = violations(b, x)
-    lam = x[b.lam_slice]
     V = friction_basis()
     mg = sp.character.total_mass * G
     forces: dict = {}

@@ -15,13 +15,11 @@ order-free), and held in memory as numpy arrays in ``JOINT_DOF_NAMES`` order.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from scenarios.errors import InputError, Location
 from scenarios.yamlio import dump_yaml_atomic, load_model
 
 from .body import JOINT_DOF_NAMES, N_JOINT

@@ -6,7 +6,7 @@ same pieces step by step; this module is the direct path used by examples and be
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from .audit import Audit, audit_motion
 from .body import Character
