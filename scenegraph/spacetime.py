@@ -285,6 +285,24 @@ def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     return np.array(out)
 
 
+def _drop_cyclic_duplicates(pins: list) -> list:
+    """Footstep pins of a cyclic motion without the ones the cycle already implies.
+
+    A cyclic motion ends in its start pose moved along the ground (root x, y free).  For a
+    handle pinned at both ends, the end pin's height and the placement of every other such
+    handle follow from the start pins; only the shift (x, y) is new.  Keeping them all makes
+    the constraint Jacobian rank-deficient (IPOPT stops with "Error in step computation"),
+    so the first such end pin keeps only its (x, y) (marked by a fourth entry "xy") and the
+    other such end pins are dropped.
+    """
+    at_start = {pn[0] for pn in pins if pn[1] < 1e-9}
+    repeated = [pn for pn in pins if pn[1] > 1.0 - 1e-9 and pn[0] in at_start]
+    if not repeated:
+        return pins
+    h, v, xy = repeated[0]
+    return [pn for pn in pins if pn not in repeated] + [(h, v, xy, "xy")]
+
+
 def build(sp: Subproblem) -> Built:
     ch, m = sp.character, sp.motion
     K, nW = m.n_ctrl, len(m.warp)
@@ -339,6 +357,8 @@ def build(sp: Subproblem) -> Built:
             for v in s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]:
                 if _depends_on_free(K, v, mask, warp_free or si in free_steps):
                     pins.append((handle, float(v), xy))
+    if sp.cyclic:
+        pins = _drop_cyclic_duplicates(pins)
     n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
     xL = ca.MX.sym("L", n_lam)
     V = friction_basis()
@@ -417,10 +437,11 @@ def build(sp: Subproblem) -> Built:
 
     # footsteps: planted handles at their footprint on the ground
     if pins:
-        s_pin = np.array([sv for _, sv, _ in pins])
+        s_pin = np.array([pn[1] for pn in pins])
         HPp = hk.map(len(pins))(ca.mtimes(_sparse(basis(K, s_pin, 0)), P).T)
-        rows = [HPp[3 * hk_names.index(h):3 * hk_names.index(h) + 3, c] - ca.vertcat(xy[0], xy[1], 0.0)
-                for c, (h, _, xy) in enumerate(pins)]
+        rows = [(HPp[3 * hk_names.index(pn[0]):3 * hk_names.index(pn[0]) + 3, c]
+                 - ca.vertcat(pn[2][0], pn[2][1], 0.0))[:2 if len(pn) > 3 else 3]
+                for c, pn in enumerate(pins)]
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
     # ground non-penetration of every foot handle at every point
     if sp.soft_pin_hz > 0 and pins:
@@ -440,7 +461,8 @@ def build(sp: Subproblem) -> Built:
             rho_extra.append(np.sqrt(sp.soft_pin_weight / len(soft)) * ca.vertcat(*rows))
     s_gnd = s_con if sp.ground_hz <= 0 else \
         np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])
-    s_gnd = np.array([v for v in s_gnd if _depends_on_free(K, v, mask, warp_free)])
+    s_gnd = np.array([v for v in s_gnd if _depends_on_free(K, v, mask, warp_free)
+                      and not (sp.cyclic and v > 1.0 - 1e-9)])  # cyclic: the end repeats the start
     HPc = hk.map(len(s_gnd))(ca.mtimes(_sparse(basis(K, s_gnd, 0)), P).T)
     ground = ca.vertcat(*[HPc[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
     add("penetration", ground, 0.0, np.inf, "ineq")
@@ -449,7 +471,8 @@ def build(sp: Subproblem) -> Built:
     dl = HP[3 * hk_names.index("ankle_l"):3 * hk_names.index("ankle_l") + 2, :] - \
         HP[3 * hk_names.index("ankle_r"):3 * hk_names.index("ankle_r") + 2, :]
     lateral = -ca.sin(yaw) * dl[0, :] + ca.cos(yaw) * dl[1, :]
-    live = [k for k in range(N) if _depends_on_free(K, s[k], mask, warp_free)]
+    live = [k for k in range(N) if _depends_on_free(K, s[k], mask, warp_free)
+            and not (sp.cyclic and s[k] > 1.0 - 1e-9)]
     add("feet_crossing", lateral[live], sp.min_foot_separation, np.inf, "ineq")
     if sp.cyclic:  # thesis §2.2.2: the cycle ends where it began, moved along the ground
         qs, qe = ca.mtimes(_sparse(basis(K, [0.0], 0)), P).T, ca.mtimes(_sparse(basis(K, [1.0], 0)), P).T
