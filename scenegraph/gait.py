@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .body import N_DOF, Character, standing_pose
+from .body import N_DOF, N_ROOT, Character, standing_pose
 from .footsteps import Footstep
 from .motion import Motion
 
@@ -118,6 +118,8 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
         q[i, 3] = heading[i]
         q[i, 2] = stand[2] * (ROOT_HEIGHT if not run else ROOT_HEIGHT - 0.02)
         q[i, 4] = np.deg2rad(3 if not run else 8)  # slight forward lean
+    # an edited body (locked joints, reduced ranges) starts inside its limits
+    q[:, N_ROOT:] = np.clip(q[:, N_ROOT:], ch.lower[N_ROOT:], ch.upper[N_ROOT:])
     return Motion.from_samples(times, q, max(6, int(round((t1 - t0) * ctrl_per_second)) + 3))
 
 

@@ -34,6 +34,7 @@ import numpy as np
 from .body import G, N_DOF, N_JOINT, N_ROOT, Character
 from .dynamics import friction_basis, muscle_and_residual
 from .footsteps import Footstep, contact_points
+from .ground import FLAT, Ground
 from .kinematics import frame_transforms, handle_position
 from .motion import Motion, basis
 from .style import Style
@@ -120,6 +121,7 @@ class Subproblem:
     cyclic: bool = False
     contact_guess: dict | None = field(default=None, compare=False, hash=False)  # warm start for λ
     min_foot_separation: float = 0.06
+    ground: Ground = FLAT  # terrain: footprint heights, non-penetration, friction pyramids (ground.py)
     max_iter: int = 300
     tol: float = 1e-4
     label: str = "step"
@@ -216,6 +218,7 @@ class Built:
     lam_slice: slice
     free_steps: list
     g_fn: ca.Function
+    contact_basis: tuple = ()  # friction pyramid V (3×4, world) per contact_index entry
 
 
 def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
@@ -248,7 +251,7 @@ def _lambda_guess(sp: Subproblem, planted: list, s: np.ndarray, mg: float) -> np
     if not sp.contact_guess:
         return lam
     from scipy.optimize import nnls
-    V = mg * friction_basis()
+    Vs = [mg * V for V in _contact_bases(sp, sp.character, planted)]
     t = sp.motion.time(s)
     for c, (handle, k, _, _) in enumerate(planted):
         if handle in sp.contact_guess:
@@ -256,8 +259,20 @@ def _lambda_guess(sp: Subproblem, planted: list, s: np.ndarray, mg: float) -> np
             times = np.asarray(times)
             if len(times) and np.min(np.abs(times - t[k])) < 0.02:
                 f = np.asarray(forces).reshape(-1, 3)[int(np.argmin(np.abs(times - t[k])))]
-                lam[4 * c:4 * c + 4] = nnls(V, f)[0]
+                lam[4 * c:4 * c + 4] = nnls(Vs[c], f)[0]
     return lam
+
+
+def _contact_bases(sp: Subproblem, ch: Character, planted: list) -> list:
+    """The ground's friction pyramid V (3×4, world) at each planted (handle, k, xy, step) pair's
+    footprint (a free footprint: at its current position); the flat-ground V off slopes."""
+    out, cache = [], {}
+    for handle, _, _, si in planted:
+        if (si, handle) not in cache:
+            xy = next(p for h, _, p in contact_points(ch, sp.footsteps[si]) if h == handle)
+            cache[si, handle] = sp.ground.friction_basis(float(xy[0]), float(xy[1]))
+        out.append(cache[si, handle])
+    return out
 
 
 def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
@@ -361,12 +376,12 @@ def build(sp: Subproblem) -> Built:
         pins = _drop_cyclic_duplicates(pins)
     n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
     xL = ca.MX.sym("L", n_lam)
-    V = friction_basis()
+    Vc = _contact_bases(sp, ch, planted if n_lam else [])  # friction pyramid per planted pair
     force_rows = {h: i for i, h in enumerate(FORCE_HANDLES)}
     Fmap = np.zeros((3 * len(FORCE_HANDLES) * N, n_lam))  # column-major (3*8, N) flattened
     for c, (handle, k, _, _) in enumerate(planted if n_lam else []):
         r0 = k * 3 * len(FORCE_HANDLES) + 3 * force_rows[handle]
-        Fmap[r0:r0 + 3, 4 * c:4 * c + 4] = mg * V
+        Fmap[r0:r0 + 3, 4 * c:4 * c + 4] = mg * Vc[c]
     Fc = ca.reshape(ca.mtimes(_sparse(Fmap), xL), 3 * len(FORCE_HANDLES), N)
 
     # parameters: fixed data and per-point style
@@ -440,7 +455,7 @@ def build(sp: Subproblem) -> Built:
         s_pin = np.array([pn[1] for pn in pins])
         HPp = hk.map(len(pins))(ca.mtimes(_sparse(basis(K, s_pin, 0)), P).T)
         rows = [(HPp[3 * hk_names.index(pn[0]):3 * hk_names.index(pn[0]) + 3, c]
-                 - ca.vertcat(pn[2][0], pn[2][1], 0.0))[:2 if len(pn) > 3 else 3]
+                 - ca.vertcat(pn[2][0], pn[2][1], sp.ground.z(pn[2][0], pn[2][1])))[:2 if len(pn) > 3 else 3]
                 for c, pn in enumerate(pins)]
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
     # ground non-penetration of every foot handle at every point
@@ -456,7 +471,8 @@ def build(sp: Subproblem) -> Built:
                     soft.append((handle, float(v), xy))
         if soft:
             HPs = hk.map(len(soft))(ca.mtimes(_sparse(basis(K, [v for _, v, _ in soft], 0)), P).T)
-            rows = [HPs[3 * hk_names.index(h):3 * hk_names.index(h) + 3, c] - ca.vertcat(xy[0], xy[1], 0.0)
+            rows = [HPs[3 * hk_names.index(h):3 * hk_names.index(h) + 3, c]
+                    - ca.vertcat(xy[0], xy[1], sp.ground.z(xy[0], xy[1]))
                     for c, (h, _, xy) in enumerate(soft)]
             rho_extra.append(np.sqrt(sp.soft_pin_weight / len(soft)) * ca.vertcat(*rows))
     s_gnd = s_con if sp.ground_hz <= 0 else \
@@ -465,6 +481,9 @@ def build(sp: Subproblem) -> Built:
                       and not (sp.cyclic and v > 1.0 - 1e-9)])  # cyclic: the end repeats the start
     HPc = hk.map(len(s_gnd))(ca.mtimes(_sparse(basis(K, s_gnd, 0)), P).T)
     ground = ca.vertcat(*[HPc[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
+    if not sp.ground.flat:  # height above the terrain under each handle
+        ground = ground - ca.vertcat(*[sp.ground.z(HPc[3 * hk_names.index(h), :], HPc[3 * hk_names.index(h) + 1, :])
+                                       for h in CONTACT_HANDLES])
     add("penetration", ground, 0.0, np.inf, "ineq")
     # feet not crossing: left ankle stays left of the right one, in the pelvis heading frame
     yaw = Q[3, :]
@@ -556,7 +575,7 @@ def build(sp: Subproblem) -> Built:
                                xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4))
                   for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
                  slice(xP.shape[0] + xW.shape[0] + xF.shape[0], x.shape[0]), free_steps,
-                 ca.Function("g", [x, p], [gg]))
+                 ca.Function("g", [x, p], [gg]), tuple(Vc))
 
 
 def violations(b: Built, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:
@@ -585,10 +604,10 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     for j, si in enumerate(b.free_steps):
         steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
     viol = violations(b, x)
-    V = friction_basis()
     mg = sp.character.total_mass * G
     forces: dict = {}
-    for h, k, sl in b.contact_index:
+    for c, (h, k, sl) in enumerate(b.contact_index):
+        V = b.contact_basis[c] if b.contact_basis else friction_basis()
         forces.setdefault(h, []).append((float(motion.time([b.s_points[k]])[0]), mg * V @ x[sl]))
     contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
     status = stats.get("return_status", "unknown")
