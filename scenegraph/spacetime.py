@@ -116,6 +116,8 @@ class Subproblem:
     # were measured to stall IPOPT: 300 iterations without convergence at 90 Hz)
     soft_pin_hz: float = 0.0  # soft footprint springs between the hard points (0: off; see README)
     soft_pin_weight: float = 1e5  # total weight, shared by the soft points
+    soft_ground_hz: float = 0.0  # one-sided ground penalty on a dense grid (0: off)
+    soft_ground_weight: float = 1e6  # total weight, shared by the dense points
     fix_start_time: bool = True
     fix_end_time: bool = True
     cyclic: bool = False
@@ -475,6 +477,14 @@ def build(sp: Subproblem) -> Built:
                     - ca.vertcat(xy[0], xy[1], sp.ground.z(xy[0], xy[1]))
                     for c, (h, _, xy) in enumerate(soft)]
             rho_extra.append(np.sqrt(sp.soft_pin_weight / len(soft)) * ca.vertcat(*rows))
+    if sp.soft_ground_hz > 0:
+        # below-ground depth of every foot handle between the hard points, least squares
+        dense = np.linspace(0, 1, max(2, int(round(m.duration * sp.soft_ground_hz)) + 1))
+        dense = np.array([v for v in dense if _depends_on_free(K, v, mask, warp_free)])
+        if len(dense):
+            HPg = hk.map(len(dense))(ca.mtimes(_sparse(basis(K, dense, 0)), P).T)
+            depth = ca.vertcat(*[ca.fmin(HPg[3 * hk_names.index(h) + 2, :], 0.0) for h in CONTACT_HANDLES])
+            rho_extra.append(np.sqrt(sp.soft_ground_weight / depth.shape[0]) * depth)
     s_gnd = s_con if sp.ground_hz <= 0 else \
         np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])
     s_gnd = np.array([v for v in s_gnd if _depends_on_free(K, v, mask, warp_free)
