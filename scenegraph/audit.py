@@ -11,8 +11,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .body import G, N_ROOT, Character
-from .dynamics import MU
 from .footsteps import Footstep, contact_points
+from .ground import FLAT, Ground
 from .kinematics import handle_positions_fn
 from .motion import Motion
 from .spacetime import CONTACT_HANDLES, FORCE_HANDLES, residual_kernel, theta_kernel_vector
@@ -27,8 +27,8 @@ class Audit:
     root_residual_max: float
     root_residual_rel: float  # rms / body weight
     footstep_error_max: float  # m, planted handle distance from its footprint
-    penetration_max: float  # m, depth of the lowest foot handle below the ground
-    friction_violation_max: float  # N, how far a contact force leaves the friction cone
+    penetration_max: float  # m, depth of the lowest foot handle below the ground (vertical, under the handle)
+    friction_violation_max: float  # N, how far a contact force leaves the friction cone (about the ground normal)
     foot_sliding_max: float  # m/s, planted handle speed
     joint_limit_violation_max: float  # rad
     energy: float  # Σ α Q_m² dt over the audited times
@@ -43,8 +43,13 @@ class Audit:
 
 
 def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[Footstep, ...] = (),
-                 contact_forces: dict | None = None, rate: float = 120.0) -> Audit:
-    """Audit ``motion``; ``contact_forces`` maps handle → (times (n,), forces (n, 3))."""
+                 contact_forces: dict | None = None, rate: float = 120.0, ground: Ground = FLAT) -> Audit:
+    """Audit ``motion``; ``contact_forces`` maps handle → (times (n,), forces (n, 3)).
+
+    ``ground``: heights, normals and μ come from it (default flat z = 0 with the solver's μ):
+    penetration is measured below the ground height under each handle, footprints sit at
+    the ground height, the friction cone is about the ground normal at the contact.
+    """
     n = max(2, int(round(motion.duration * rate)) + 1)
     t = np.linspace(motion.start, motion.end, n)
     s = motion.to_canonical(t)
@@ -52,15 +57,16 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
     names = tuple(CONTACT_HANDLES)
     hp = np.asarray(handle_positions_fn(ch, names).map(n)(q.T)).reshape(3, len(names), n, order="F")
     # hp[:, j, k]: handle j at time k
-    pen = max(0.0, float(-hp[2].min()))
+    above = hp[2] - (0.0 if ground.flat else ground.height(hp[0], hp[1]))  # (handles, times)
+    pen = max(0.0, float(-np.min(above)))
     foot_err, slide = 0.0, 0.0
     for step in footsteps:
-        for handle, (ta, tb), xy in contact_points(ch, step):
+        for handle, (ta, tb), xy in contact_points(ch, step, None, ground):
             j = names.index(handle)
             inside = (t >= ta - 1e-9) & (t <= tb + 1e-9)
             if not inside.any():
                 continue
-            target = np.array([xy[0], xy[1], 0.0])
+            target = np.array([xy[0], xy[1], ground.height(xy[0], xy[1])])
             err = np.linalg.norm(hp[:, j, inside].T - target, axis=1)
             foot_err = max(foot_err, float(err.max()))
             if inside.sum() > 1:
@@ -76,11 +82,18 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
     fric = 0.0
     for h, (ht, hf) in cf.items():
         i = FORCE_HANDLES.index(h)
-        for tt, f in zip(ht, hf):
+        where = None
+        if not ground.flat and len(ht):  # the contact's (x, y): the handle's, when the force acts
+            qh, _, _ = motion.state_at_s(motion.to_canonical(np.asarray(ht, float)))
+            where = np.asarray(handle_positions_fn(ch, (h,)).map(len(ht))(np.atleast_2d(qh).T))[:2]
+        for j, (tt, f) in enumerate(zip(ht, hf)):
             k = int(np.argmin(np.abs(times - tt)))
             F[3 * i:3 * i + 3, k] += f
-            tang = np.hypot(f[0], f[1])
-            fric = max(fric, tang - MU * f[2], -f[2])
+            if where is None:
+                tang = np.hypot(f[0], f[1])
+                fric = max(fric, tang - ground.friction * f[2], -f[2])
+            else:
+                fric = max(fric, ground.cone_violation(where[0, j], where[1, j], f))
     sq = motion.to_canonical(times)
     q2, qd2, qdd2 = motion.state_at_s(sq)
     th = np.tile(theta_kernel_vector(style)[:, None], (1, len(times)))

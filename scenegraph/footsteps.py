@@ -39,15 +39,22 @@ class Footstep:
             raise ValueError(f"footstep interval must be positive, got [{self.t0}, {self.t1}]")
 
 
-def contact_points(ch: Character, step: Footstep, position=None) -> list[tuple[str, tuple[float, float], object]]:
+def contact_points(ch: Character, step: Footstep, position=None,
+                   ground=None) -> list[tuple[str, tuple[float, float], object]]:
     """[(handle, (t_from, t_to), target xy)] for the handles this footstep plants.
 
-    ``position`` overrides the ball position (a numpy pair or a CasADi 2-vector).
+    ``position`` overrides the ball position (a numpy pair or a CasADi 2-vector).  On an
+    inclined ``ground`` (:class:`~scenegraph.ground.Ground`) the heel lies a foot length
+    behind the ball *along the ground*, so its horizontal offset shrinks by the slope's
+    cosine along the foot (the slope is taken at the footstep's nominal position).
     """
     pos = step.position if position is None else position
     heel_h, ball_h = ch.handle(f"heel_{step.foot}"), ch.handle(f"ball_{step.foot}")
     foot_len = ball_h.point[0] - heel_h.point[0]
     d = np.array([np.cos(step.heading), np.sin(step.heading)])
+    if ground is not None and not ground.flat:
+        rise = float(ground.gradient(*step.position) @ d)  # dz per m along the foot
+        foot_len = foot_len / np.sqrt(1.0 + rise * rise)
     out = []
     span = step.t1 - step.t0
     if step.ball is not None:

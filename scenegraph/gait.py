@@ -92,11 +92,13 @@ def _root_path(footsteps: tuple[Footstep, ...], times: np.ndarray):
 
 def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1: float,
                    ctrl_per_second: float = 24.0, run: bool = False,
-                   example=None) -> Motion:
+                   example=None, ground=None) -> Motion:
     """An initial motion over [t0, t1] (s) for the given footsteps.
 
     ``example``: an optional (times, q (T, 35), footsteps) example motion whose poses are
     matched by leg phase; without it the built-in example gait is used.
+    ``ground`` (a :class:`~scenegraph.ground.Ground`): the pelvis height follows the ground
+    height under the pelvis (default flat, z = 0).
     """
     times = np.linspace(t0, t1, max(8, int((t1 - t0) * 60) + 1))
     xy, heading = _root_path(footsteps, times)
@@ -117,6 +119,8 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
         q[i, 0:2] = xy[i]
         q[i, 3] = heading[i]
         q[i, 2] = stand[2] * (ROOT_HEIGHT if not run else ROOT_HEIGHT - 0.02)
+        if ground is not None and not ground.flat:
+            q[i, 2] += ground.height(xy[i, 0], xy[i, 1])
         q[i, 4] = np.deg2rad(3 if not run else 8)  # slight forward lean
     # an edited body (locked joints, reduced ranges) starts inside its limits
     q[:, N_ROOT:] = np.clip(q[:, N_ROOT:], ch.lower[N_ROOT:], ch.upper[N_ROOT:])

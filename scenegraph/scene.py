@@ -26,6 +26,7 @@ from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachG
 from .body import Character, make_character
 from .footsteps import WALK_BALL, WALK_HEEL, Footstep
 from .gait import initial_motion
+from .ground import FLAT, Ground, ground_from_environment
 from .kinematics import handle_positions_fn
 from .motion import Motion
 from .spacetime import Avoid, HandleTarget
@@ -94,6 +95,7 @@ class Scene:
     couplings: tuple[CouplingSpec, ...] = ()
     friction: float = 1.0
     style_refs: tuple[tuple[str, str], ...] = field(default=())  # (ref, resolved file or "built-in")
+    ground: Ground = FLAT  # terrain the solver and the audit use (flat unless the scenario has slopes)
 
     def character(self, name: str) -> CharacterState:
         for c in self.characters:
@@ -257,6 +259,7 @@ def build_scene(scn: Scenario) -> Scene:
             couplings.append(CouplingSpec(name, c.type, tuple((r.character, r.handle) for r in c.holders),
                                           tuple(c.interval), mass=c.mass, tolerance=0.05))
 
+    ground = ground_from_environment(scn.environment)
     attackers = {g.attacker for g in scn.goals if isinstance(g, TackleGoal)}
     order = sorted(scn.characters, key=lambda c: c.name in attackers)
     for spec in order:
@@ -313,11 +316,11 @@ def build_scene(scn: Scenario) -> Scene:
         if not steps:
             steps = list(standing_footsteps(start, 0.0, T, fl))
         steps.sort(key=lambda f: (f.t0, f.foot))
-        motion = initial_motion(ch, tuple(steps), 0.0, T)
+        motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground)
         chars.append(CharacterState(spec.name, ch, tuple(styles), tuple(steps), motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     return Scene(scn.name, T, tuple(chars), tuple(goals), tuple(couplings),
-                 float(scn.environment.ground.friction), tuple(sorted(refs.items())))
+                 float(scn.environment.ground.friction), tuple(sorted(refs.items())), ground)
 
 
 # --- targets from the current scene ------------------------------------------------------------

@@ -271,7 +271,7 @@ def _contact_bases(sp: Subproblem, ch: Character, planted: list) -> list:
     out, cache = [], {}
     for handle, _, _, si in planted:
         if (si, handle) not in cache:
-            xy = next(p for h, _, p in contact_points(ch, sp.footsteps[si]) if h == handle)
+            xy = next(p for h, _, p in contact_points(ch, sp.footsteps[si], None, sp.ground) if h == handle)
             cache[si, handle] = sp.ground.friction_basis(float(xy[0]), float(xy[1]))
         out.append(cache[si, handle])
     return out
@@ -360,7 +360,7 @@ def build(sp: Subproblem) -> Built:
         if si in free_steps:
             j = free_steps.index(si)
             pos = (xF[2 * j], xF[2 * j + 1])
-        return contact_points(ch, step, pos)
+        return contact_points(ch, step, pos, sp.ground)
 
     # contacts: (handle, k) pairs planted by footsteps, λ per pair
     planted = []  # (handle, k, target xy expr, step index): contact force at grid point k

@@ -38,10 +38,11 @@ def synthesize(ch: Character, style: Style, footsteps: tuple[Footstep, ...], t0:
                free=frozenset({"q"}), run: bool = False, init: Motion | None = None, example=None,
                **subproblem) -> Synthesis:
     """Synthesize a motion over world time [t0, t1] (s) that plants ``footsteps``."""
-    m0 = init or initial_motion(ch, footsteps, t0, t1, run=run, example=example)
-    shared = {k: v for k, v in subproblem.items() if k in ("collocation_hz", "constraint_hz", "cyclic")}
+    m0 = init or initial_motion(ch, footsteps, t0, t1, run=run, example=example, ground=subproblem.get("ground"))
+    shared = {k: v for k, v in subproblem.items() if k in ("collocation_hz", "constraint_hz", "cyclic", "ground")}
     pre = presolve_kinematics(ch, style, m0, footsteps, **shared)
     start = pre.motion if pre.success else m0
     res = solve(Subproblem(ch, style, start, footsteps, free=frozenset(free), label="synthesis", **subproblem))
-    aud = audit_motion(ch, style, res.motion, res.footsteps, res.contact_forces)
+    aud = audit_motion(ch, style, res.motion, res.footsteps, res.contact_forces,
+                       **({"ground": subproblem["ground"]} if "ground" in subproblem else {}))
     return Synthesis(res, aud, pre, pre.seconds + res.seconds)

@@ -75,6 +75,7 @@ _MARKER_COLORS = {
     "footprint": (0.15, 0.15, 0.15), "goal": (0.95, 0.75, 0.10), "contact": (0.85, 0.20, 0.20),
 }
 _DEFAULT_MARKER_COLOR = (0.5, 0.5, 0.9)
+_GROUND_COLOR = (0.55, 0.5, 0.42)  # ramps and slopes
 
 
 @dataclass(frozen=True, eq=False)
@@ -521,6 +522,48 @@ def _write_markers(stage, markers: Sequence[Marker], fps: float, t0: int, t1: in
     return pts
 
 
+def ramp_mesh(plane) -> tuple[np.ndarray, list[int], list[int]]:
+    """A closed slab under a :class:`~scenegraph.ground.Plane`: its top face is the plane over
+    the region, its bottom at min(0, lowest corner) − 2 cm; (points (8, 3) m, face counts,
+    indices), faces wound counter-clockwise seen from outside."""
+    x0, y0, x1, y1 = plane.region
+    corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    top = [(x, y, float(plane.plane_height(x, y))) for x, y in corners]
+    zb = min(0.0, min(p[2] for p in top)) - 0.02
+    pts = np.array(top + [(x, y, zb) for x, y in corners], float)
+    faces = [[0, 1, 2, 3], [7, 6, 5, 4], [0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3], [3, 7, 4, 0]]
+    return pts, [4] * len(faces), [i for f in faces for i in f]
+
+
+def _write_ground(stage, ground, looks: str) -> list[np.ndarray]:
+    """One Mesh per inclined plane of ``ground`` under /World/Ground (flat ground: nothing)."""
+    from pxr import Gf, Sdf, UsdGeom, Vt
+    if ground is None or not getattr(ground, "planes", ()):
+        return []
+    UsdGeom.Scope.Define(stage, "/World/Ground")
+    mat = _define_material(stage, f"{looks}/ground", _GROUND_COLOR)
+    pts_all = []
+    for i, plane in enumerate(ground.planes):
+        name = character_prim_name(plane.name or f"slope_{i}")
+        pts, counts, idx = ramp_mesh(plane)
+        mesh = UsdGeom.Mesh.Define(stage, f"/World/Ground/{name}_{i}")
+        mesh.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, p)) for p in pts]))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray(counts))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(idx))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, pts.min(0))), Gf.Vec3f(*map(float, pts.max(0)))]))
+        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*_GROUND_COLOR)]))
+        _bind_material(mesh.GetPrim(), mat)
+        prim = mesh.GetPrim()
+        prim.CreateAttribute("compose:kind", Sdf.ValueTypeNames.String, custom=True).Set("slope")
+        prim.CreateAttribute("compose:angleDeg", Sdf.ValueTypeNames.Double, custom=True).Set(
+            math.degrees(plane.angle))
+        prim.CreateAttribute("compose:headingDeg", Sdf.ValueTypeNames.Double, custom=True).Set(
+            math.degrees(plane.heading))
+        pts_all.append(pts)
+    return pts_all
+
+
 def _write_forces(stage, forces: Sequence[ForceArrow], fps: float) -> None:
     from pxr import Gf, Sdf, UsdGeom, Vt
     if not forces:
@@ -604,10 +647,11 @@ def _write_camera(stage, points: np.ndarray) -> None:
 
 def build_stage(characters: Sequence[CharacterTrack], fps: float, *, markers: Sequence[Marker] = (),
                 metadata: dict | None = None, debug_forces: Sequence[ForceArrow] = (),
-                mesh_segments: tuple[int, int] = (16, 10)):
+                mesh_segments: tuple[int, int] = (16, 10), ground=None):
     """Compose the stage in memory (a ``Usd.Stage`` on an anonymous layer).
 
-    ``mesh_segments`` = (segments around, rings pole to pole) of each ellipsoid mesh."""
+    ``mesh_segments`` = (segments around, rings pole to pole) of each ellipsoid mesh.
+    ``ground`` (a :class:`~scenegraph.ground.Ground`): its slopes become ramp meshes."""
     from pxr import Usd, UsdGeom
     fps = float(fps)
     if not (math.isfinite(fps) and fps > 0):
@@ -635,6 +679,7 @@ def build_stage(characters: Sequence[CharacterTrack], fps: float, *, markers: Se
     for pp in preps:
         _write_character(stage, pp, looks, segments)
     marker_pts = _write_markers(stage, markers, fps, t0, t1, looks)
+    marker_pts = list(marker_pts) + [p for pts in _write_ground(stage, ground, looks) for p in pts]
     _write_forces(stage, debug_forces, fps)
     pts = [pp.extents.reshape(-1, 3) for pp in preps] + [np.asarray(marker_pts).reshape(-1, 3)]
     _write_camera(stage, np.concatenate(pts, axis=0))
@@ -659,7 +704,7 @@ def _export_layer(layer, path: str) -> None:
 
 def export_usd(path, characters: Sequence[CharacterTrack], fps: float, *, markers: Iterable[Marker] = (),
                metadata: dict | None = None, debug_forces: Iterable[ForceArrow] = (),
-               mesh_segments: tuple[int, int] = (16, 10)) -> Path:
+               mesh_segments: tuple[int, int] = (16, 10), ground=None) -> Path:
     """Write the characters' motions (sampled at ``fps``) as a USD stage at ``path``.
 
     The format follows the extension (``.usda``, ``.usdc``, ``.usdz``).  The write is atomic:
@@ -675,7 +720,7 @@ def export_usd(path, characters: Sequence[CharacterTrack], fps: float, *, marker
     if not parent.is_dir():
         raise InputError(f"cannot export USD to {path}: directory {parent} does not exist")
     stage = build_stage(characters, fps, markers=list(markers), metadata=metadata, debug_forces=list(debug_forces),
-                        mesh_segments=mesh_segments)
+                        mesh_segments=mesh_segments, ground=ground)
     tmpdir = tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
     try:
         stem = path.stem

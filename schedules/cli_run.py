@@ -146,7 +146,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
 
     audits = {}
     for c in final.characters:
-        a = audit_motion(c.character, c.style, c.motion, c.footsteps, result.contact_forces.get(c.name))
+        a = audit_motion(c.character, c.style, c.motion, c.footsteps, result.contact_forces.get(c.name),
+                         ground=final.ground)
         audits[c.name] = a.to_dict()
     goals, couplings = goal_report(final, audits)
 
@@ -156,7 +157,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
         times, q = c.motion.sample(fps)
         tracks.append(CharacterTrack(c.name, c.character, np.asarray(q, float), float(times[0])))
         for i, f in enumerate(c.footsteps):
-            markers.append(Marker(f"{c.name}_footprint_{i}", "footprint", (f.position[0], f.position[1], 0.0),
+            markers.append(Marker(f"{c.name}_footprint_{i}", "footprint",
+                                  (f.position[0], f.position[1], final.ground.height(*f.position)),
                                   (f.t0, f.t1), character=c.name))
     for g in final.goals:
         if g.type == "walk_to":
@@ -171,7 +173,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
     metadata = {"scenario": scn.name, "scenario_file": str(source),
                 "styles": {ref: where for ref, where in final.style_refs},
                 "versions": _versions(), "energies": energies}
-    export_usd(out_path, tracks, fps, markers=markers, metadata=metadata)
+    export_usd(out_path, tracks, fps, markers=markers, metadata=metadata, ground=final.ground)
 
     rep = {
         "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),

@@ -182,7 +182,7 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
     sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
                     dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid,
                     style_end=style_end, max_iter=_max_iter(300 if step.kind == FULL else 100),
-                    label=step.id.replace("/", "_"))
+                    label=step.id.replace("/", "_"), ground=scene.ground)
     mask = None if whole else _window_mask(sp, m.n_ctrl)
     return sp, mask
 
@@ -198,7 +198,7 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...]) -> dict:
         pre_info = None
         if who in presolve:
             st = cur.character(who)
-            pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps)
+            pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=cur.ground)
             pre_info = {"status": pre.status, "success": pre.success, "iterations": pre.iterations,
                         "seconds": pre.seconds}
             if pre.success:
@@ -228,7 +228,7 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...]) -> dict:
 def presolve_character(scene: Scene, who: str) -> dict:
     """Make a character's initial motion satisfy its footsteps and the ground (no dynamics)."""
     st = scene.character(who)
-    pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps)
+    pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground)
     return {"step": f"presolve:{who}", "ctrl": np.asarray(pre.motion.ctrl, float),
             "warp": np.asarray(pre.motion.warp, float), "status": pre.status, "success": bool(pre.success),
             "iterations": pre.iterations, "seconds": pre.seconds,

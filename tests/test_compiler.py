@@ -41,6 +41,11 @@ KINDS = [
     ("walk_to_run", {TIME_LAYERED, TIMEWARP}, 1),
     ("handhold", {COUPLED, TIMEWARP}, 1),
     ("tackle", {DECREASING_HORIZON, TIMEWARP}, 1),
+    # edits of one style (paper §7): the walk's shape, one subproblem each
+    ("suitcase", {TIMEWARP}, 1),
+    ("limp", {TIMEWARP}, 1),
+    ("uphill", {TIMEWARP}, 1),
+    ("downhill", {TIMEWARP}, 1),
 ]
 
 

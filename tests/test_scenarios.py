@@ -42,7 +42,8 @@ def test_names_agree_with_character_model():
 # --- bundled scenarios --------------------------------------------------------------------------
 
 def test_bundled_scenarios_present():
-    assert {"walk", "walk_to", "two_walkers", "walk_to_run", "handhold", "tackle"} <= set(BUNDLED)
+    assert {"walk", "walk_to", "two_walkers", "walk_to_run", "handhold", "tackle",
+            "suitcase", "limp", "uphill", "downhill"} <= set(BUNDLED)
     assert "default" in bundled_styles()
 
 
