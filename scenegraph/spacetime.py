@@ -483,7 +483,8 @@ def build(sp: Subproblem) -> Built:
         dense = np.array([v for v in dense if _depends_on_free(K, v, mask, warp_free)])
         if len(dense):
             HPg = hk.map(len(dense))(ca.mtimes(_sparse(basis(K, dense, 0)), P).T)
-            depth = ca.vertcat(*[ca.fmin(HPg[3 * hk_names.index(h) + 2, :], 0.0) for h in CONTACT_HANDLES])
+            depth = ca.vertcat(*[ca.fmin(HPg[3 * hk_names.index(h) + 2, :] - sp.ground.z(
+                HPg[3 * hk_names.index(h), :], HPg[3 * hk_names.index(h) + 1, :]), 0.0) for h in CONTACT_HANDLES])
             rho_extra.append(np.sqrt(sp.soft_ground_weight / depth.shape[0]) * depth)
     s_gnd = s_con if sp.ground_hz <= 0 else \
         np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])

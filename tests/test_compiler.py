@@ -46,6 +46,8 @@ KINDS = [
     ("limp", {TIMEWARP}, 1),
     ("uphill", {TIMEWARP}, 1),
     ("downhill", {TIMEWARP}, 1),
+    ("turn180", {TIMEWARP}, 1),
+    ("springy_run", {TIMEWARP}, 1),
 ]
 
 

@@ -43,7 +43,7 @@ def test_names_agree_with_character_model():
 
 def test_bundled_scenarios_present():
     assert {"walk", "walk_to", "two_walkers", "walk_to_run", "handhold", "tackle",
-            "suitcase", "limp", "uphill", "downhill"} <= set(BUNDLED)
+            "suitcase", "limp", "uphill", "downhill", "turn180", "springy_run"} <= set(BUNDLED)
     assert "default" in bundled_styles()
 
 
