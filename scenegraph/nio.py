@@ -71,7 +71,10 @@ LAM_REG = 1e-3  # the solver's λ regularisation (kept for a well-posed contact 
 WARM_START = (("warm_start_init_point", "yes"), ("mu_init", 1e-4),
               ("warm_start_bound_push", 1e-6), ("warm_start_bound_frac", 1e-6),
               ("warm_start_slack_bound_push", 1e-6), ("warm_start_slack_bound_frac", 1e-6),
-              ("warm_start_mult_bound_push", 1e-6))
+              ("warm_start_mult_bound_push", 1e-6),
+              # no "acceptable level" exit: on this flat energy IPOPT otherwise stops while
+              # the energy is still falling fast (measured: E 146 → 35 when continued)
+              ("acceptable_iter", 0))
 
 
 def joint_rms_deg(a: Motion, b: Motion, fps: float = 30.0) -> float:
@@ -227,7 +230,8 @@ class NIO:
 
     def __init__(self, ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *,
                  solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4,
-                 ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3, rounds: int = 1):
+                 ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3, rounds: int = 1,
+                 cyclic: bool = False, soft_pin_hz: float = 0.0):
         self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
         self.verbose = False
         self.rounds = rounds  # a counterexample = `rounds` solves of solve_iter iterations, each
@@ -235,7 +239,7 @@ class NIO:
         self.feas_tol = feas_tol  # m: a counterexample must satisfy C to this tolerance
         self.sp = Subproblem(ch, default_style(ch.total_mass), target, self.footsteps, free=frozenset({"q"}),
                              collocation_hz=collocation_hz, max_iter=solve_iter, tol=tol, label="nio",
-                             ipopt_options=tuple(ipopt_options))
+                             ipopt_options=tuple(ipopt_options), cyclic=cyclic, soft_pin_hz=soft_pin_hz)
         t = _time.perf_counter()
         self.built: Built = build(self.sp)
         # rebuild with an iteration callback that keeps the best feasible iterate
@@ -677,10 +681,11 @@ def _versions() -> dict[str, str]:
 
 def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *, init: Style | str = "paper",
                 name: str = "learned", clip: str | None = None, frames: str | None = None,
-                body: str | None = None, callback=None, solve_iter: int = 80, **run_kw) -> NIOResult:
+                body: str | None = None, callback=None, solve_iter: int = 100, cyclic: bool = False,
+                **run_kw) -> NIOResult:
     """Learn a style from ``target``.  ``init``: "paper" (α = 1/M, q̄ = mean pose, springs by
     Eq. 22) or a Style to start from.  The returned style carries its provenance."""
-    nio = NIO(ch, target, footsteps, solve_iter=solve_iter)
+    nio = NIO(ch, target, footsteps, solve_iter=solve_iter, cyclic=cyclic)
     th0 = nio.initial_theta() if isinstance(init, str) else init.vector().copy()
     out = nio.run(th0, callback=callback, **run_kw)
     prov = Provenance(clip=clip, frames=frames, body=body or ch.preset, versions=_versions(), g_final=float(out.g_final),
@@ -688,3 +693,53 @@ def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], 
     out.style = style_from_theta(out.theta, name=name, provenance=prov)
     out.nio = nio  # type: ignore[attr-defined]
     return out
+
+
+def resample(motion: Motion, ctrl_per_second: float = 24.0, fps: float = 120.0) -> Motion:
+    """The same motion on a denser spline (the synthesis resolution): a reconstruction at
+    10–12 control points per second cannot hold a foot on its footprint at 30 Hz."""
+    t, q = motion.sample(fps)
+    return Motion.from_samples(t, q, max(6, int(round(motion.duration * ctrl_per_second)) + 3))
+
+
+def feasible_target(ch: Character, motion: Motion, footsteps: tuple[Footstep, ...], *, cyclic: bool = False,
+                    weight: float = 1.0, hz: float = 30.0, max_iter: int = 400, tol: float = 1e-6) -> Result:
+    """X_T for NIO from a reconstructed clip: the motion closest to ``motion`` that satisfies
+    the footstep constraints C exactly, with the root residual softly zero (Appendix A):
+
+        min  w_r Σ_k Q_0(s_k)² (normalised as the energy) + weight Σ_f |q(t_f) − q_clip(t_f)|²   s.t. C
+
+    (a spacetime solve with every muscle weight α set to 0 and pose springs toward the clip at
+    ``hz``).  Q_0 depends on no part of θ but the shoe spring, which is the default one (the
+    one NIO starts from; with the shoe off, the target's heels would sit compressed at the
+    ground and every θ with a shoe would see a root residual there), so the target is not
+    biased toward a style.  A reconstruction that misses its footprints by a centimetre is
+    otherwise beaten by every counterexample for the wrong
+    reason (it is outside C).
+    """
+    from .spacetime import PoseTarget
+    n = max(2, int(round(motion.duration * hz)) + 1)
+    t = motion.start + np.arange(n) * (motion.duration / (n - 1))
+    q = motion.canonical(motion.to_canonical(t))
+    poses = tuple(PoseTarget(float(ti), tuple(map(float, qi)), weight=weight / n) for ti, qi in zip(t, q))
+    st = default_style(ch.total_mass)
+    sp = Subproblem(ch, st, motion, tuple(footsteps), free=frozenset({"q"}), poses=poses, cyclic=cyclic,
+                    max_iter=max_iter, tol=tol, label="nio-target",
+                    ipopt_options=(("acceptable_iter", 0),))
+    b = build(sp)
+    N = len(b.s_points)
+    nK = b.p.shape[0] - N_JOINT * N
+    p = np.concatenate([b.p[:nK], np.zeros(N_JOINT * N)])  # sqrt(α) = 0: no muscle energy
+    return solve(sp, replace(b, p=p))
+
+
+def resynthesize(ch: Character, style: Style, target: Motion, footsteps: tuple[Footstep, ...], *,
+                 max_iter: int = 300, cyclic: bool = False) -> Result:
+    """Re-synthesis for the real-clip check (paper §7, "Estimating style parameters"): the
+    spacetime solve with ``style`` and the clip's own footsteps, started from the clip (X_T),
+    the same fixed budget for every style (``max_iter`` IPOPT iterations, tol 1e-6, no
+    "acceptable" exit).  A style under which X_T is near-optimal keeps the motion near X_T;
+    others drift away from it."""
+    sp = Subproblem(ch, style, target, tuple(footsteps), free=frozenset({"q"}), max_iter=max_iter, tol=1e-6,
+                    cyclic=cyclic, label=f"resynth:{style.name}", ipopt_options=(("acceptable_iter", 0),))
+    return solve(sp)

@@ -83,9 +83,15 @@ def _steps_on_motion(ch, motion, steps):
 
 
 def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz: float = 10.0,
-                reconstruct: bool = True):
-    """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B); X_T is
-    the smooth reconstruction (Appendix A) unless ``reconstruct`` is False (spline fit)."""
+                reconstruct: bool = True, feasible: bool = True):
+    """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B).
+
+    X_T: the smooth reconstruction (Appendix A; a plain spline fit if ``reconstruct`` is
+    False); footsteps C: detected on the clip and re-placed where the reconstruction puts the
+    feet.  With ``feasible`` (default) X_T is then moved onto C (resampled to the synthesis
+    resolution and projected by :func:`scenegraph.nio.feasible_target`: exact footsteps, root
+    residual softly zero, 0.7° RMS from the reconstruction on 07_01), because NIO compares
+    X_T with motions that satisfy C."""
     from scenegraph.contacts import detect_footsteps
     from scenegraph.mocap import load_clip
     from scenegraph.motion import Motion
@@ -106,20 +112,38 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     if not steps:
         raise InputError(f"{path} frames {frames[0]}:{frames[1]}: no foot contacts detected")
     steps = _steps_on_motion(clip.character, motion, steps)
+    if feasible:
+        from scenegraph.nio import feasible_target, resample
+
+        res = feasible_target(clip.character, resample(motion), steps)
+        if max(res.violations.values(), default=0.0) > 1e-4:
+            raise InputError(f"{path} frames {frames[0]}:{frames[1]}: the reconstruction cannot be made to "
+                             f"satisfy its footsteps ({res.summary()})")
+        motion = res.motion
     return clip.character, motion, steps, clip
+
+
+def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, resynth: dict | None = None) -> None:
+    """Write a learned style with its provenance (and, when measured, the re-synthesis RMS)."""
+    from scenegraph.style import Provenance, save_style
+
+    prov = res.style.provenance.model_dump() if res.style.provenance else {}
+    if resynth:
+        prov["resynth_rms_deg"] = dict(resynth)
+    style = res.style.model_copy(update={"provenance": Provenance(**prov)})
+    save_style(style, out, header=f"learned by: compose learn {clip_name} --frames {frames[0]}:{frames[1]} "
+                                  f"--body {body} -o {Path(out).name}")
 
 
 def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=None, name=None,
                    progress=None, **run_kw):
     from scenegraph.nio import learn_style
-    from scenegraph.style import save_style
 
     ch, motion, steps, clip = clip_target(path, frames, body)
     res = learn_style(ch, motion, steps, name=name or Path(out or path).stem, clip=Path(path).name,
                       frames=f"{frames[0]}:{frames[1]}", body=body, callback=progress, **run_kw)
     if out is not None:
-        save_style(res.style, out, header=f"learned by: compose learn {Path(path).name} "
-                                          f"--frames {frames[0]}:{frames[1]} --body {body}")
+        save_learned(res, out, Path(path).name, frames, body)
     return res, (ch, motion, steps, clip)
 
 

@@ -92,6 +92,37 @@ def test_cli_learn_bad_input(tmp_path):
     assert not out.exists()
 
 
+def test_resample_keeps_the_motion(small):
+    from scenegraph.nio import resample
+    _, _, m, _ = small
+    coarse = resample(m, ctrl_per_second=10.0)  # like a reconstruction
+    r = resample(coarse, ctrl_per_second=24.0)
+    assert r.n_ctrl > coarse.n_ctrl and r.start == pytest.approx(m.start) and r.end == pytest.approx(m.end)
+    assert joint_rms_deg(r, coarse) < 0.5  # measured 0.29° (the knots are not nested; the fit is smoothed)
+
+
+def test_shipped_styles_have_provenance():
+    """Every style in scenarios/styles/ was learned: provenance names a shipped clip (never an
+    _iclone one), frames, body, versions, final G and the measured re-synthesis."""
+    from pathlib import Path
+
+    from scenegraph.style import load_style
+    root = Path(__file__).resolve().parents[1] / "scenarios"
+    files = sorted((root / "styles").glob("*.yaml"))
+    if not files:
+        pytest.skip("no learned style shipped yet")
+    for f in files:
+        st = load_style(f)
+        pv = st.provenance
+        assert pv is not None and pv.clip and pv.frames and pv.body, f
+        assert "iclone" not in pv.clip and (root / "clips" / pv.clip).is_file(), f
+        assert pv.g_final is not None and pv.g_final >= 0 and pv.versions, f
+        assert abs(st.alpha.sum() - 1) < 1e-6
+        extra = pv.model_extra or {}
+        assert set(extra["resynth_rms_deg"]) >= {"learned", "default", "springs_off"}, f
+        assert "compose learn" in f.read_text().splitlines()[0], f
+
+
 def _theta_star(d):
     rng = np.random.default_rng(0)
     a = d.alpha * np.exp(rng.normal(0, 0.5, N_JOINT))
@@ -99,63 +130,50 @@ def _theta_star(d):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="theta* is not recovered: the spacetime solver does not converge "
+                                        "tightly enough for G to be measured (see the docstring)")
 def test_synthetic_recovery():
-    """X_T synthesised with a known θ* (α perturbed, springs ×1.5 / ×0.7), then refined at θ*
-    by two warm-started 300-iteration solves (the synthesis stops at IPOPT's dual tolerance far
-    above the optimum: a later solve at θ* itself lowers E(X_T) 0.358 → 0.042, so without the
-    refinement G(θ*) > G(default)).  NIO (bundle method, 60-iteration counterexamples) from the
-    default style.
+    """One cyclic walk cycle X_T synthesised with a known θ* (α perturbed, springs ×1.5 / ×0.7):
+    the synthesis, then a 1500-iteration refinement without IPOPT's "acceptable" exit (the
+    pipeline).  NIO (bundle method, 150-iteration counterexamples warm-started at X_T) from the
+    default style; re-synthesis by the same pipeline from the same initial motion.
 
-    Asserted (what is achieved): G(θ*) ≤ 5 % of G(default) (X_T is hardly beaten at θ*),
-    G(default) > 0 (the counterexample beats X_T), G falls ≥ 100× (both ends re-read with every
-    counterexample found) and the learned style is valid.
-    Measured (2026-11-22): G 0.0274 → 3.5e-6 (ratio 1.3e-4) in 15 iterations, 26 solves, 139 s.
-    NOT achieved: recovery.  θ barely moves toward θ* (mean |log α/α*| 0.318 vs 0.334 at the
-    default; ks1/ks1* 0.80, ks2/ks2* 1.15) and the re-synthesis (the same pipeline as X_T) is
-    12.7° RMS from X_T with the learned style vs 11.9° with the default (target ≤ 2°): G → 0
-    means the 60-iteration solver no longer finds a counterexample, not that X_T is optimal.
-    The numbers are printed."""
+    Goals: G falls ≥ 100× and the re-synthesis with the learned style is ≤ 2° RMS from X_T.
+    Measured (2026-11-22, cyclic window): the pipeline itself is the obstacle.  A synthesis
+    that IPOPT reports as converged (tol 1e-4, 53 iterations, E 146) keeps falling when
+    continued (E 35 after another 485 iterations, the motion 12.4° RMS away; Gauss–Newton steps
+    creep along a flat valley at ~0.1 % per iteration), so X_T is not the optimum under θ*:
+    G(θ*) = 0.0075 is 21 % of G(default) = 0.0366 and NIO cannot drive G toward 0.  NIO took G
+    0.0366 → 0.0298 in 10 iterations (415 s) (see the printed numbers for the re-synthesis).
+    What would fix it: a counterexample/synthesis solver that converges (an exact or
+    structured-secant Hessian for the dynamics residuals, see README).
+    """
+    from scenegraph.footsteps import footsteps_for_walk
+    from scenegraph.nio import WARM_START
+    from scenegraph.spacetime import Subproblem, solve
     from scenegraph.synthesis import synthesize
 
     ch = make_character("adult_male")
     d = default_style(ch.total_mass)
     star = _theta_star(d)
-    fs = footsteps_for_walk(n_steps=3)
-    def pipeline(style):  # synthesis, then two warm-started 300-iteration refinements
-        m = synthesize(ch, style, fs, 0.0, 1.3).result.motion
-        th = style.vector()
-        for _ in range(2):
-            m = ref.counterexample(th, m, ref.forces(m, th)[1]).motion
-        return m
+    fs = footsteps_for_walk(n_steps=4)
+    t0, t1 = fs[1].t0, fs[-1].t0  # one cycle: two steps, cyclic
 
-    th_star = star.vector()
-    X0 = synthesize(ch, star, fs, 0.0, 1.3).result.motion
-    ref = NIO(ch, X0, fs, solve_iter=300)
+    def pipeline(style):
+        m = synthesize(ch, style, fs, t0, t1, cyclic=True, max_iter=1000).result.motion
+        return solve(Subproblem(ch, style, m, fs, free=frozenset({"q"}), cyclic=True, max_iter=1500, tol=1e-6,
+                                ipopt_options=(("acceptable_iter", 0),))).motion
+
     XT = pipeline(star)
-    assert ref.measure(th_star, XT)[0] < 0.5 * ref.measure(th_star, X0)[0]
-
-    nio = NIO(ch, XT, fs, solve_iter=60)
-    g_star = nio.evaluate(th_star).G  # the floor: how well the solver can still beat X_T at θ*
+    nio = NIO(ch, XT, fs, solve_iter=150, cyclic=True, ipopt_options=WARM_START)
+    g_star = nio.evaluate(star.vector()).G  # how well the solver still beats X_T at θ* (0 if X_T optimal)
     th0 = d.vector()
-    th0[:N_JOINT] /= th0[:N_JOINT].sum()
     hist = []
-    out = nio.run(th0, max_iter=30, callback=hist.append)
-    assert out.g_initial > 0
-    assert out.g_final < out.g_initial  # both re-read with every counterexample found
-    assert g_star <= 0.05 * out.g_initial
-    assert abs(out.style.alpha.sum() - 1) < 1e-9
-
-    assert out.g_final <= 0.01 * out.g_initial  # the issue's "two orders of magnitude"
-
-    # re-synthesis: the pipeline that made X_T (same initial motion), with each style
+    out = nio.run(th0, max_iter=12, callback=hist.append)
     rms = {name: joint_rms_deg(pipeline(st), XT) for name, st in (("learned", out.style), ("default", d))}
-    lr = np.log(out.style.alpha / star.alpha)
     print("G per iteration:", [f"{h.G:.4g}" for h in hist], f"G(theta*) = {g_star:.3g}")
-    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} (ratio {out.g_final / out.g_initial:.3g}, {out.stop_reason}, "
-          f"{out.iterations} iterations, {out.evaluations} solves, {out.seconds:.0f} s); "
-          f"resynth rms deg: " + ", ".join(f"{k} {v:.2f}" for k, v in rms.items()))
-    print(f"alpha mean |log(a/a*)|: learned {np.abs(lr).mean():.3f}, default "
-          f"{np.abs(np.log(d.alpha / star.alpha)).mean():.3f}; ks1/ks1* median "
-          f"{np.median(out.style.ks1 / np.maximum(star.ks1, 1e-9)):.3f}, ks2/ks2* median "
-          f"{np.median(out.style.ks2 / np.maximum(star.ks2, 1e-9)):.3f}")
-    assert np.isfinite(rms["learned"])  # the 2° target is not met (see the printed numbers)
+    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} ({out.stop_reason}, {out.iterations} iterations, "
+          f"{out.seconds:.0f} s); resynth rms deg: " + ", ".join(f"{k} {v:.2f}" for k, v in rms.items()))
+    assert out.g_initial > 0 and abs(out.style.alpha.sum() - 1) < 1e-9
+    assert out.g_final <= 0.01 * out.g_initial  # the issue's two orders of magnitude
+    assert rms["learned"] <= 2.0 < rms["default"]
