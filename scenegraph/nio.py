@@ -231,8 +231,9 @@ class NIO:
     def __init__(self, ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *,
                  solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4,
                  ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3, rounds: int = 1,
-                 cyclic: bool = False, soft_pin_hz: float = 0.0):
+                 cyclic: bool = False, soft_pin_hz: float = 0.0, local: bool = False):
         self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
+        self.local = local  # counterexamples by one Gauss–Newton step from X_T (local_counterexample)
         self.verbose = False
         self.rounds = rounds  # a counterexample = `rounds` solves of solve_iter iterations, each
         # restarted from the best feasible motion so far (IPOPT's last iterate can be worse)
@@ -360,6 +361,75 @@ class NIO:
         self.n_solves += 1
         return res
 
+    def _params(self, theta: np.ndarray) -> np.ndarray:
+        b, N = self.built, self.N
+        nK = b.p.shape[0] - (N_THETA_FULL - N_JOINT) * N - N_JOINT * N
+        TH = np.tile(theta[N_JOINT:, None], (1, N))
+        SA = np.tile(np.sqrt(np.maximum(theta[:N_JOINT], 0.0))[:, None], (1, N))
+        return np.concatenate([b.p[:nK], TH.ravel(order="F"), SA.ravel(order="F")])
+
+    def local_counterexample(self, theta: np.ndarray, start: Motion, lam0: np.ndarray,
+                             steps: tuple[float, ...] = (1.0, 0.5, 0.25, 0.1, 0.05, 0.02, 0.01)) -> tuple[Motion, float]:
+        """A *local* counterexample: the Gauss–Newton step from ``start`` (X_T) within C,
+
+            min_d  ∇f·d + ½ dᵀ H d   s.t.  the active constraints' linearisation A d = 0,
+                   contact coefficients at 0 stay at 0,
+
+        (H: the solver's Gauss–Newton Hessian, f its objective under θ), one sparse KKT solve;
+        the step is shortened (``steps``) to the lowest measured energy that keeps C to
+        ``feas_tol``.  Its energy drop predicts E(X_T) − (the local minimum next to X_T): it
+        vanishes exactly when X_T is stationary under θ, which is what a re-synthesis started
+        at X_T needs.  The paper allows this view of G ("the local minimum discovered by the
+        optimizer", §6).  Returns (motion, worst constraint violation)."""
+        import scipy.sparse as sps
+        import scipy.sparse.linalg as spla
+
+        b = self.built
+        if not hasattr(self, "_fns"):
+            sv = b.solver
+            self._fns = (sv.get_function("nlp_grad_f"), sv.get_function("nlp_hess_l"), sv.get_function("nlp_jac_g"))
+        fgrad, fhess, fjac = self._fns
+        p = self._params(theta)
+        x = b.x0.copy()
+        nq = start.ctrl.size
+        x[:nq] = np.asarray(start.ctrl, float).ravel()
+        x[b.lam_slice] = lam0
+        _, gf = fgrad(x, p)
+        gf = np.asarray(gf, float).ravel()
+        Hu = fhess(x, p, 1.0, np.zeros(b.lbg.size))
+        Hu = sps.csc_matrix(Hu.sparse()) if hasattr(Hu, "sparse") else sps.csc_matrix(np.asarray(Hu))
+        H = Hu + Hu.T - sps.diags(Hu.diagonal())
+        gv, Jg = fjac(x, p)
+        gv = np.asarray(gv, float).ravel()
+        Jg = sps.csr_matrix(Jg.sparse())
+        tol = 1e-7
+        active = (np.abs(gv - b.lbg) <= tol) | (np.abs(gv - b.ubg) <= tol)
+        A = Jg[np.flatnonzero(active)]
+        n = x.size
+        lam_idx = np.arange(b.lam_slice.start, b.lam_slice.stop)
+        fixed = lam_idx[x[lam_idx] <= 1e-12]
+        if fixed.size:
+            A = sps.vstack([A, sps.csr_matrix((np.ones(fixed.size), (np.arange(fixed.size), fixed)), shape=(fixed.size, n))])
+        m = A.shape[0]
+        ridge = 1e-8 * max(1.0, float(abs(H.diagonal()).max()))
+        K = sps.bmat([[H + ridge * sps.identity(n), A.T], [A, -1e-12 * sps.identity(m)]], format="csc")
+        sol = spla.spsolve(K, np.r_[-gf, np.zeros(m)])
+        d = sol[:n]
+        best, best_E, best_v = start, np.inf, 0.0
+        for a in steps:
+            xa = x + a * d
+            xa[b.lam_slice] = np.maximum(xa[b.lam_slice], 0.0)
+            P = np.asarray(b.unpack(xa, p)[0], float)
+            m_a = Motion(P, np.asarray(start.warp, float))
+            v = max(violations(replace(b, p=p), xa).values(), default=0.0)
+            if v > self.feas_tol:
+                continue
+            E = self.measure(theta, m_a)[0]
+            if E < best_E:
+                best, best_E, best_v = m_a, E, v
+        self.n_solves += 1
+        return best, best_v
+
     def evaluate(self, theta: np.ndarray, candidates: tuple[Motion, ...] = ()) -> _Eval:
         """G(θ), D(θ) and the approximate gradient (Eq. 21) of G + D.
 
@@ -374,7 +444,13 @@ class NIO:
             E, g, F, lam = self.measure(theta, m)
             if np.isfinite(E) and E < best[0]:
                 best = (E, g, m, F, lam)
-        for _ in range(self.rounds):  # short solves chained from the best motion so far
+        res = None
+        if self.local:
+            XS, _ = self.local_counterexample(theta, self.target, lamT)
+            ES, gS, FS, lamS = self.measure(theta, XS)
+            if np.isfinite(ES) and ES < best[0]:
+                best = (ES, gS, XS, FS, lamS)
+        for _ in range(0 if self.local else self.rounds):  # short solves chained from the best motion so far
             res = self.counterexample(theta, best[2], best[4])
             XS = res.motion
             ES, gS, FS, lamS = self.measure(theta, XS)
@@ -682,14 +758,19 @@ def _versions() -> dict[str, str]:
 def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *, init: Style | str = "paper",
                 name: str = "learned", clip: str | None = None, frames: str | None = None,
                 body: str | None = None, callback=None, solve_iter: int = 100, cyclic: bool = False,
-                **run_kw) -> NIOResult:
+                local: bool = True, **run_kw) -> NIOResult:
     """Learn a style from ``target``.  ``init``: "paper" (α = 1/M, q̄ = mean pose, springs by
     Eq. 22) or a Style to start from.  The returned style carries its provenance."""
-    nio = NIO(ch, target, footsteps, solve_iter=solve_iter, cyclic=cyclic)
+    nio = NIO(ch, target, footsteps, solve_iter=solve_iter, cyclic=cyclic, local=local)
     th0 = nio.initial_theta() if isinstance(init, str) else init.vector().copy()
+    if local:  # cheap iterations (~1 s): a stricter relative-decrease stop
+        run_kw.setdefault("rtol", 0.005)
+        run_kw.setdefault("patience", 5)
     out = nio.run(th0, callback=callback, **run_kw)
     prov = Provenance(clip=clip, frames=frames, body=body or ch.preset, versions=_versions(), g_final=float(out.g_final),
-                      g_initial=float(out.g_initial), iterations=out.iterations, stop=out.stop_reason)
+                      g_initial=float(out.g_initial), iterations=out.iterations, stop=out.stop_reason,
+                      counterexamples="local (one Gauss-Newton step from X_T)" if local else
+                      f"spacetime solves of {solve_iter} IPOPT iterations")
     out.style = style_from_theta(out.theta, name=name, provenance=prov)
     out.nio = nio  # type: ignore[attr-defined]
     return out

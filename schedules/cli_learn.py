@@ -177,5 +177,5 @@ def register(sub) -> None:
     p.add_argument("--frames", required=True, metavar="A:B", help="source frames A to B (exclusive)")
     p.add_argument("--body", default="adult_male", metavar="PRESET", help="body preset (default adult_male)")
     p.add_argument("-o", "--output", required=True, metavar="STYLE.yaml")
-    p.add_argument("--max-iter", type=int, default=30, help="safety limit on NIO iterations (default 30)")
+    p.add_argument("--max-iter", type=int, default=200, help="safety limit on NIO iterations (default 200)")
     p.set_defaults(func=_cmd_learn)

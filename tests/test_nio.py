@@ -101,6 +101,24 @@ def test_resample_keeps_the_motion(small):
     assert joint_rms_deg(r, coarse) < 0.5  # measured 0.29° (the knots are not nested; the fit is smoothed)
 
 
+def test_local_counterexample_lowers_energy_within_C():
+    """The Gauss–Newton counterexample (local NIO) of a motion that satisfies C: lower energy,
+    C kept to feas_tol, and G(θ) = E(X_T) − E(X_S) ≥ 0 with a finite Eq. 21 gradient."""
+    from scenegraph.synthesis import presolve_kinematics
+    ch = make_character("adult_male")
+    fs = footsteps_for_walk(n_steps=3)
+    d = default_style(ch.total_mass)
+    m = presolve_kinematics(ch, d, initial_motion(ch, fs, 0.0, 1.3), fs).motion
+    nio = NIO(ch, m, fs, local=True)
+    th = d.vector()
+    E, _, _, lam = nio.measure(th, m)
+    XS, viol = nio.local_counterexample(th, m, lam)
+    assert viol <= nio.feas_tol
+    assert nio.measure(th, XS)[0] < 0.99 * E
+    ev = nio.evaluate(th)
+    assert ev.G > 0 and np.all(np.isfinite(ev.grad))
+
+
 def test_shipped_styles_have_provenance():
     """Every style in scenarios/styles/ was learned: provenance names a shipped clip (never an
     _iclone one), frames, body, versions, final G and the measured re-synthesis."""
@@ -123,6 +141,9 @@ def test_shipped_styles_have_provenance():
         assert "compose learn" in f.read_text().splitlines()[0], f
 
 
+MAX_NIO_ITER = 200
+
+
 def _theta_star(d):
     rng = np.random.default_rng(0)
     a = d.alpha * np.exp(rng.normal(0, 0.5, N_JOINT))
@@ -130,26 +151,27 @@ def _theta_star(d):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="theta* is not recovered: the spacetime solver does not converge "
-                                        "tightly enough for G to be measured (see the docstring)")
+@pytest.mark.xfail(strict=True, reason="G falls 54x, not 100x, and theta* is not recovered (docstring)")
 def test_synthetic_recovery():
-    """One cyclic walk cycle X_T synthesised with a known θ* (α perturbed, springs ×1.5 / ×0.7):
-    the synthesis, then a 1500-iteration refinement without IPOPT's "acceptable" exit (the
-    pipeline).  NIO (bundle method, 150-iteration counterexamples warm-started at X_T) from the
-    default style; re-synthesis by the same pipeline from the same initial motion.
+    """One cyclic walk cycle X_T synthesised with a known θ* (α perturbed, springs ×1.5 / ×0.7)
+    by the pipeline: synthesis, then a refinement of up to 1500 iterations without IPOPT's
+    "acceptable" exit (a synthesis IPOPT calls converged at tol 1e-4 keeps falling, E 146 → 35,
+    and moves 12° when continued: on this flat energy a loosely converged X_T is not the
+    optimum under θ*).  NIO from the default style with *local* counterexamples (one
+    Gauss–Newton step from X_T within C, ``NIO(local=True)``); re-synthesis by the same pipeline
+    from the same initial motion (not from X_T).  Numbers are printed (see README Status).
 
-    Goals: G falls ≥ 100× and the re-synthesis with the learned style is ≤ 2° RMS from X_T.
-    Measured (2026-11-22, cyclic window): the pipeline itself is the obstacle.  A synthesis
-    that IPOPT reports as converged (tol 1e-4, 53 iterations, E 146) keeps falling when
-    continued (E 35 after another 485 iterations, the motion 12.4° RMS away; Gauss–Newton steps
-    creep along a flat valley at ~0.1 % per iteration), so X_T is not the optimum under θ*:
-    G(θ*) = 0.0075 is 21 % of G(default) = 0.0366 and NIO cannot drive G toward 0.  NIO took G
-    0.0366 → 0.0298 in 10 iterations (415 s) (see the printed numbers for the re-synthesis).
-    What would fix it: a counterexample/synthesis solver that converges (an exact or
-    structured-secant Hessian for the dynamics residuals, see README).
-    """
+    Measured (2026-11-22, same computation run as scripts, ~15 min on the shared 2 cores):
+    pipeline(θ*) reproduces X_T exactly (0.0°).  G 9.0e-4 → 1.66e-5 (54×; G(θ*) = 5.1e-5, so
+    the learned θ makes X_T *more* stationary than θ* does) in 113 iterations, 277 s.  Springs
+    are recovered (median ks1/ks1* 1.00, ks2/ks2* 1.06 vs 0.67 / 1.43 at the default) but α is
+    not (mean |log α/α*| 0.47 vs 0.33 at the default).  Re-synthesis: learned 22.5° RMS from
+    X_T (the refinement lands in another local minimum, E 211 vs 35), default 8.6°; NIO
+    stopped earlier (39 iterations, G 2.5e-5, 36×) gave 4.65°.  From X_T itself (300
+    iterations) the learned style drifts 4.7°.  Why: the energy is multi-modal and flat
+    (Gauss–Newton steps creep), so which minimum the pipeline reaches depends on θ in ways G
+    does not see; G is local."""
     from scenegraph.footsteps import footsteps_for_walk
-    from scenegraph.nio import WARM_START
     from scenegraph.spacetime import Subproblem, solve
     from scenegraph.synthesis import synthesize
 
@@ -165,15 +187,16 @@ def test_synthetic_recovery():
                                 ipopt_options=(("acceptable_iter", 0),))).motion
 
     XT = pipeline(star)
-    nio = NIO(ch, XT, fs, solve_iter=150, cyclic=True, ipopt_options=WARM_START)
-    g_star = nio.evaluate(star.vector()).G  # how well the solver still beats X_T at θ* (0 if X_T optimal)
-    th0 = d.vector()
+    nio = NIO(ch, XT, fs, cyclic=True, local=True)
+    g_star = nio.evaluate(star.vector()).G  # the floor: X_T is not exactly stationary under θ*
     hist = []
-    out = nio.run(th0, max_iter=12, callback=hist.append)
+    out = nio.run(d.vector(), max_iter=MAX_NIO_ITER, rtol=0.003, patience=6, callback=hist.append)
     rms = {name: joint_rms_deg(pipeline(st), XT) for name, st in (("learned", out.style), ("default", d))}
-    print("G per iteration:", [f"{h.G:.4g}" for h in hist], f"G(theta*) = {g_star:.3g}")
-    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} ({out.stop_reason}, {out.iterations} iterations, "
-          f"{out.seconds:.0f} s); resynth rms deg: " + ", ".join(f"{k} {v:.2f}" for k, v in rms.items()))
+    lr = np.abs(np.log(out.style.alpha / star.alpha)).mean()
+    print(f"G {out.g_initial:.4g} -> {out.g_final:.4g} (ratio {out.g_final / out.g_initial:.3g}; G(theta*) {g_star:.3g}; "
+          f"{out.stop_reason}, {out.iterations} iterations, {out.seconds:.0f} s); resynth rms deg: "
+          + ", ".join(f"{k} {v:.2f}" for k, v in rms.items())
+          + f"; alpha mean |log a/a*| learned {lr:.3f} default {np.abs(np.log(d.alpha / star.alpha)).mean():.3f}")
     assert out.g_initial > 0 and abs(out.style.alpha.sum() - 1) < 1e-9
     assert out.g_final <= 0.01 * out.g_initial  # the issue's two orders of magnitude
     assert rms["learned"] <= 2.0 < rms["default"]

@@ -1,6 +1,6 @@
 """Benchmark: learn the walk style from one gait cycle of CMU 07_01 by NIO, then re-synthesise.
 
-    python tests/benchmarks/bench_nio.py [--frames 64:201] [--max-iter 12] [--out scenarios/styles/walk.yaml]
+    python tests/benchmarks/bench_nio.py [--frames 64:201] [--max-iter 200] [--out scenarios/styles/walk.yaml]
 
 X_T: the clip's smooth reconstruction moved onto its own footsteps
 (``schedules.cli_learn.clip_target``).  Timed: NIO only (``nio_s``; loading, reconstruction
@@ -34,7 +34,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--clip", default=str(CLIP))
     ap.add_argument("--frames", default="64:201")
-    ap.add_argument("--max-iter", type=int, default=12)
+    ap.add_argument("--max-iter", type=int, default=200)
     ap.add_argument("--resynth-iter", type=int, default=300)
     ap.add_argument("--out", default=None, help="also write the learned style here")
     args = ap.parse_args()
