@@ -48,7 +48,8 @@ def main() -> None:
     ch, XT, steps, clip = clip_target(args.clip, frames, "adult_male")
     print(f"clip, reconstruction and target: {time.perf_counter() - t:.1f} s", flush=True)
     t = time.perf_counter()
-    res = learn_style(ch, XT, steps, name="walk", clip=Path(args.clip).name, frames=args.frames,
+    res = learn_style(ch, XT, steps, name=Path(args.out).stem if args.out else "walk", clip=Path(args.clip).name,
+                      frames=args.frames,
                       body="adult_male", callback=progress, max_iter=args.max_iter)
     nio_s = time.perf_counter() - t
     print(f"stop: {res.stop_reason}; evaluations {res.evaluations}", flush=True)
