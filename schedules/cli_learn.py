@@ -123,13 +123,16 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     return clip.character, motion, steps, clip
 
 
-def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, resynth: dict | None = None) -> None:
+def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, resynth: dict | None = None,
+                 resynth_warm: dict | None = None) -> None:
     """Write a learned style with its provenance (and, when measured, the re-synthesis RMS)."""
     from scenegraph.style import Provenance, save_style
 
     prov = res.style.provenance.model_dump() if res.style.provenance else {}
-    if resynth:
+    if resynth:  # measured by tests/benchmarks/bench_nio.py (NIO.resynthesize, 300 iterations)
         prov["resynth_rms_deg"] = dict(resynth)
+    if resynth_warm:
+        prov["resynth_warm_rms_deg"] = dict(resynth_warm)
     style = res.style.model_copy(update={"provenance": Provenance(**prov)})
     save_style(style, out, header=f"# learned by: compose learn {clip_name} --frames {frames[0]}:{frames[1]} "
                                   f"--body {body} -o {Path(out).name}\n")
