@@ -359,6 +359,9 @@ class StyleChangeGoal(_Model):
     style: str = Field(min_length=1, max_length=512, description="new style: bundled name or file path")
     blend: Num | None = Field(None, gt=0.0, le=60.0,
                               description="transition length (s); default: the seam window of the time-layered schedule")
+    gait: Literal["walk", "run"] | None = Field(
+        None, description="gait of generated footsteps after the change (run: flight phases, longer and "
+                          "quicker steps); default: unchanged")
 
 
 Goal = Annotated[Union[FootprintsGoal, WalkToGoal, ReachGoal, TackleGoal, AvoidGoal, StyleChangeGoal],

@@ -89,6 +89,8 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
         for j, (tt, f) in enumerate(zip(ht, hf)):
             k = int(np.argmin(np.abs(times - tt)))
             F[3 * i:3 * i + 3, k] += f
+            if h not in CONTACT_HANDLES:  # a coupling force at a hand: no friction cone
+                continue
             if where is None:
                 tang = np.hypot(f[0], f[1])
                 fric = max(fric, tang - ground.friction * f[2], -f[2])

@@ -19,6 +19,7 @@ __all__ = ["initial_motion", "leg_phase", "example_gait_pose"]
 
 D = np.deg2rad
 ROOT_HEIGHT = 0.95  # initial pelvis height as a fraction of the standing height
+RUN_BLEND = 0.6  # s, walk → run pose blend of initial motions with a gait change
 
 
 def leg_phase(footsteps: tuple[Footstep, ...], foot: str, t: float) -> tuple[str, float]:
@@ -91,12 +92,14 @@ def _root_path(footsteps: tuple[Footstep, ...], times: np.ndarray):
 
 
 def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1: float,
-                   ctrl_per_second: float = 24.0, run: bool = False,
+                   ctrl_per_second: float = 24.0, run: bool | float = False,
                    example=None, ground=None) -> Motion:
     """An initial motion over [t0, t1] (s) for the given footsteps.
 
     ``example``: an optional (times, q (T, 35), footsteps) example motion whose poses are
     matched by leg phase; without it the built-in example gait is used.
+    ``run``: True for running poses throughout, or the world time (s) of a walk → run change
+    (poses blended over RUN_BLEND around it).
     ``ground`` (a :class:`~scenegraph.ground.Ground`): the pelvis height follows the ground
     height under the pelvis (default flat, z = 0).
     """
@@ -110,18 +113,24 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
         ex_phases = np.array([[_phase_code(leg_phase(ex_steps, f, t)) for f in ("l", "r")] for t in ex_t])
     for i, t in enumerate(times):
         ph_l, ph_r = leg_phase(footsteps, "l", t), leg_phase(footsteps, "r", t)
+        if isinstance(run, bool):
+            w_run = float(run)
+        else:  # walk → run over RUN_BLEND seconds around the given time (smoothstep)
+            u = float(np.clip((t - run) / RUN_BLEND + 0.5, 0.0, 1.0))
+            w_run = u * u * (3 - 2 * u)
         if ex_phases is None:
-            q[i] = example_gait_pose(ch, ph_l, ph_r, run)
+            q[i] = ((1 - w_run) * example_gait_pose(ch, ph_l, ph_r, False)
+                    + w_run * example_gait_pose(ch, ph_l, ph_r, True))
         else:
             code = np.array([_phase_code(ph_l), _phase_code(ph_r)])
             j = int(np.argmin(np.sum(_phase_dist(ex_phases, code), axis=1)))
             q[i] = ex_q[j]
         q[i, 0:2] = xy[i]
         q[i, 3] = heading[i]
-        q[i, 2] = stand[2] * (ROOT_HEIGHT if not run else ROOT_HEIGHT - 0.02)
+        q[i, 2] = stand[2] * (ROOT_HEIGHT - 0.02 * w_run)
         if ground is not None and not ground.flat:
             q[i, 2] += ground.height(xy[i, 0], xy[i, 1])
-        q[i, 4] = np.deg2rad(3 if not run else 8)  # slight forward lean
+        q[i, 4] = np.deg2rad(3 + 5 * w_run)  # slight forward lean, more when running
     # an edited body (locked joints, reduced ranges) starts inside its limits
     q[:, N_ROOT:] = np.clip(q[:, N_ROOT:], ch.lower[N_ROOT:], ch.upper[N_ROOT:])
     return Motion.from_samples(times, q, max(6, int(round((t1 - t0) * ctrl_per_second)) + 3))

@@ -24,16 +24,16 @@ from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachG
                               TackleGoal, WalkToGoal, joint_dofs)
 
 from .body import Character, make_character
-from .footsteps import WALK_BALL, WALK_HEEL, Footstep
+from .footsteps import RUN_BALL, WALK_BALL, WALK_HEEL, Footstep
 from .gait import initial_motion
 from .ground import FLAT, Ground, ground_from_environment
 from .kinematics import handle_positions_fn
 from .motion import Motion
-from .spacetime import Avoid, HandleTarget
+from .spacetime import Avoid, HandleTarget, Spring
 from .style import Style, default_style, load_style
 
 __all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets",
-           "coupling_targets", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH"]
+           "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH"]
 
 CADENCE = 1.85          # steps per second of generated walks
 STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
@@ -171,6 +171,70 @@ def _part(frac, a, b, c, d):
     return (float((lo - c) / (d - c)), float((hi - c) / (d - c)))
 
 
+@dataclass(frozen=True)
+class Gait:
+    """Timing and size of generated steps: steps per second, stance / stride, step length (m)."""
+
+    cadence: float
+    stance_fraction: float
+    step_length: float
+    heel: tuple[float, float] | None
+    ball: tuple[float, float] | None
+
+
+GAITS = {"walk": Gait(CADENCE, STANCE_FRACTION, 0.7, WALK_HEEL, WALK_BALL),
+         "run": Gait(2.8, 0.38, 1.1, None, RUN_BALL)}
+
+
+def gait_footsteps(start_xy, target_xy, t0: float, t1: float, change: tuple[float, float, str] | None = None,
+                   *, width: float = FOOT_WIDTH, foot_length: float = 0.2, first: str = "r",
+                   before: str = "walk") -> tuple[Footstep, ...]:
+    """Free footsteps along start → target over [t0, t1] (world m, s) through a gait change.
+
+    ``change`` = (time, blend, gait after) (s, s, name in GAITS): cadence, stance fraction and
+    step length move from ``before``'s to the new gait's over [time − blend/2, time + blend/2]
+    (smoothstep).  Stance k is centred where the step phase ∫ cadence dt reaches k; the
+    pelvis advances in proportion to ∫ cadence · step length dt, scaled to reach the target
+    at t1; each foot lands under it (± width/2).  A stance is a walk's (heel, then ball) or
+    a run's (ball only, flight between stances) by which gait dominates at its middle.
+    Without ``change`` the whole path uses ``before``.
+    """
+    tc, blend, after = change or (t0, 0.0, before)
+    g0, g1 = GAITS[before], GAITS[after]
+    tt = np.linspace(t0, t1, 2001)
+    w = np.clip((tt - (tc - blend / 2)) / max(blend, 1e-6), 0.0, 1.0)
+    w = w * w * (3 - 2 * w)
+    cad = g0.cadence + (g1.cadence - g0.cadence) * w
+    sf = g0.stance_fraction + (g1.stance_fraction - g0.stance_fraction) * w
+    speed = cad * (g0.step_length + (g1.step_length - g0.step_length) * w)
+    dt = np.diff(tt)
+    phase = np.r_[0.0, np.cumsum((cad[1:] + cad[:-1]) / 2 * dt)]
+    dist_t = np.r_[0.0, np.cumsum((speed[1:] + speed[:-1]) / 2 * dt)]
+    p0, p1 = np.asarray(start_xy, float), np.asarray(target_xy, float)
+    d = p1 - p0
+    u = d / max(float(np.linalg.norm(d)), 1e-9)
+    lat = np.array([-u[1], u[0]])
+    heading = math.atan2(u[1], u[0])
+    steps = []
+    for k in range(int(math.floor(phase[-1])) + 1):
+        tm = float(np.interp(k, phase, tt))
+        i = int(np.searchsorted(tt, tm).clip(0, len(tt) - 1))
+        stance = 2 * sf[i] / cad[i]
+        a, b = tm - stance / 2, tm + stance / 2
+        c, e = max(a, t0), min(b, t1)
+        this = first if k % 2 == 0 else ("l" if first == "r" else "r")
+        pel = p0 + d * dist_t[i] / dist_t[-1]
+        side = 1.0 if this == "l" else -1.0
+        ball = pel + side * width / 2 * lat + u * foot_length / 2
+        gg = g1 if w[i] >= 0.5 else g0
+        heel, ballf = _part(gg.heel, a, b, c, e), _part(gg.ball, a, b, c, e)
+        if e - c < 0.04 or (heel is None and ballf is None):
+            continue
+        steps.append(Footstep(this, (float(ball[0]), float(ball[1])), float(c), float(e), heading,
+                              heel=heel, ball=ballf, free=True))
+    return tuple(steps)
+
+
 def walk_footsteps(start_xy, target_xy, t0: float, t1: float, *, cadence: float = CADENCE,
                    stance_fraction: float = STANCE_FRACTION, width: float = FOOT_WIDTH, foot_length: float = 0.2,
                    free: bool = True, first: str = "r") -> tuple[Footstep, ...]:
@@ -282,6 +346,11 @@ def build_scene(scn: Scenario) -> Scene:
             if isinstance(g, FootprintsGoal) and g.character == spec.name:
                 steps += _explicit_footsteps(g, start[2], fl)
         walk = [g for g in scn.goals if isinstance(g, WalkToGoal) and g.character == spec.name]
+        gaits = [g for g in scn.goals if isinstance(g, StyleChangeGoal) and g.character == spec.name and g.gait]
+        change = None
+        if gaits:  # the (first) gait change shapes the generated footsteps; blend default 0.6 s
+            c = min(gaits, key=lambda g: g.time)
+            change = (float(c.time), float(c.blend or 0.6), c.gait)
         if walk and not steps:
             p, t = start[:2], 0.0
             for g in sorted(walk, key=lambda g: g.time):
@@ -294,7 +363,10 @@ def build_scene(scn: Scenario) -> Scene:
                     if dt <= 1e-6:
                         continue
                     first = "r" if not steps else ("l" if steps[-1].foot == "r" else "r")
-                    steps += list(walk_footsteps(a, b, t, t + dt, foot_length=fl, first=first))
+                    if change is not None and t - 1e-6 <= change[0] <= t + dt + 1e-6:
+                        steps += list(gait_footsteps(a, b, t, t + dt, change, foot_length=fl, first=first))
+                    else:
+                        steps += list(walk_footsteps(a, b, t, t + dt, foot_length=fl, first=first))
                     t += dt
                 p = g.target
             if t < T - 1e-6:  # stand at the target for the rest of the scenario
@@ -310,13 +382,14 @@ def build_scene(scn: Scenario) -> Scene:
                 aim = np.asarray(scn.character(g.target).start.position, float)
             d = aim - np.asarray(start[:2])
             stop = aim - d / max(np.linalg.norm(d), 1e-6) * 0.35
-            steps += list(walk_footsteps(start[:2], stop, 0.0, g.time, foot_length=fl))
+            steps += list(gait_footsteps(start[:2], stop, 0.0, g.time, foot_length=fl, before="run"))
             if g.time < T - 1e-6:
                 steps += list(standing_footsteps((stop[0], stop[1], math.atan2(d[1], d[0])), g.time, T, fl))
         if not steps:
             steps = list(standing_footsteps(start, 0.0, T, fl))
         steps.sort(key=lambda f: (f.t0, f.foot))
-        motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground)
+        run_from = change[0] if change is not None and change[2] == "run" else False
+        motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground, run=run_from)
         chars.append(CharacterState(spec.name, ch, tuple(styles), tuple(steps), motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     return Scene(scn.name, T, tuple(chars), tuple(goals), tuple(couplings),
@@ -404,6 +477,25 @@ def coupling_targets(scene: Scene, character: str, coupling: str, stiffness: flo
         for t, p in zip(times, track):
             out.append(HandleTarget(mine[0], float(t), tuple(float(v) for v in p), w, name=f"coupling:{c.name}"))
     return tuple(out)
+
+
+def coupling_springs(scene: Scene, character: str, coupling: str, stiffness: float,
+                     window: tuple[float, float], rate: float = 60.0) -> tuple[Spring, ...]:
+    """The physical rubber band of a hand-hold for ``character``: a spring of ``stiffness``
+    (N/m) from its handle to each partner's held handle (their current motion), sampled at
+    ``rate`` Hz over the coupling interval ∩ window.  Solved in turn, each partner feels the
+    equal and opposite force k (p_other − p_own) (thesis §6.4.3)."""
+    c = scene.coupling(coupling)
+    mine = [h for who, h in c.handles if who == character]
+    others = [(who, h) for who, h in c.handles if who != character]
+    a, b = max(c.interval[0], window[0]), min(c.interval[1], window[1])
+    if c.type != "hand_hold" or not mine or not others or b <= a:
+        return ()
+    times = np.linspace(a, b, max(2, int(math.ceil((b - a) * rate)) + 1))
+    return tuple(Spring(mine[0], tuple(float(t) for t in times),
+                        tuple(tuple(float(v) for v in p) for p in handle_track(scene.character(who), h, times)),
+                        float(stiffness), name=f"coupling:{c.name}")
+                 for who, h in others)
 
 
 def _resolve(path) -> Path:

@@ -39,7 +39,7 @@ from .kinematics import frame_transforms, handle_position
 from .motion import Motion, basis
 from .style import Style
 
-__all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Avoid", "Result", "solve", "build",
+__all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Avoid", "Spring", "Result", "solve", "build",
            "CONTACT_HANDLES", "residual_kernel", "W_ROOT"]
 
 W_ROOT = 100.0  # paper: weight of the root residual
@@ -76,6 +76,23 @@ class PoseTarget:
 
 
 @dataclass(frozen=True)
+class Spring:
+    """A physical spring on ``handle``: force stiffness · (anchor(t) − handle position) (N, world).
+
+    ``times`` (s, world, increasing) and ``points`` (n × 3, m) sample the anchor's path — a
+    partner's held handle in a rubber-band coupling (thesis §6.4.3); it is interpolated
+    linearly at the collocation times, and the force acts only within [times[0], times[-1]].
+    The force enters the equations of motion at the handle (one of FORCE_HANDLES).
+    """
+
+    handle: str
+    times: tuple[float, ...]
+    points: tuple[tuple[float, float, float], ...]
+    stiffness: float  # N/m
+    name: str = "spring"
+
+
+@dataclass(frozen=True)
 class Avoid:
     """Keep ``handle`` outside a sphere (center world m, radius m) at world time ``t``."""
 
@@ -109,6 +126,7 @@ class Subproblem:
     targets: tuple[HandleTarget, ...] = ()
     poses: tuple[PoseTarget, ...] = ()
     avoid: tuple[Avoid, ...] = ()
+    springs: tuple[Spring, ...] = ()
     style_end: Style | None = None
     collocation_hz: float = 30.0  # dynamics (energy, contact forces)
     constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
@@ -129,6 +147,8 @@ class Subproblem:
     label: str = "step"
     ipopt_options: tuple = ()  # extra IPOPT options as (name, value) pairs (e.g. warm starts in NIO)
     nlpsol_options: tuple = ()  # extra CasADi nlpsol options as (name, value) pairs (e.g. iteration_callback)
+    stall_iterations: int = 0  # > 0: stop as "Stalled" (a success) when the objective has not improved by
+    # STALL_REL for this many iterations while every constraint holds to STALL_VIOL (see StallMonitor)
 
 
 @dataclass
@@ -221,6 +241,62 @@ class Built:
     free_steps: list
     g_fn: ca.Function
     contact_basis: tuple = ()  # friction pyramid V (3×4, world) per contact_index entry
+    spring_handles: tuple = ()  # handle of each Subproblem.springs entry, in order
+    monitor: object = None  # StallMonitor when Subproblem.stall_iterations > 0
+
+
+STALL_REL = 1e-6  # relative objective improvement that counts as progress
+STALL_VIOL = 1e-5  # worst constraint violation (m, or the constraint's unit) of a stalled iterate
+
+
+class StallMonitor(ca.Callback):
+    """IPOPT iteration callback: stop once ``patience`` consecutive iterates satisfy every
+    constraint to STALL_VIOL without improving the best feasible objective by STALL_REL
+    (relative).
+
+    Windows whose held boundary leaves residuals that cannot vanish are large-residual least
+    squares; there the Gauss–Newton Hessian converges only linearly, and IPOPT can spend
+    hundreds of iterations on the last digits of a flat objective.  ``stalled`` records why
+    the solve stopped.
+    """
+
+    def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray, patience: int):
+        ca.Callback.__init__(self)
+        self.nx, self.ng, self.lbg, self.ubg, self.patience = nx, ng, lbg, ubg, patience
+        self.best, self.since, self.stalled = np.inf, 0, False
+        self.construct("stall_monitor", {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        n = ca.nlpsol_out(i)
+        size = {"f": (1, 1), "g": (self.ng, 1), "lam_g": (self.ng, 1), "p": (0, 0), "lam_p": (0, 0)}
+        return ca.Sparsity.dense(*size.get(n, (self.nx, 1)))
+
+    def eval(self, arg):
+        f = float(arg[ca.nlpsol_out().index("f")])
+        g = np.asarray(arg[ca.nlpsol_out().index("g")]).ravel()
+        viol = float(np.max(np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0))) if g.size else 0.0
+        if viol > STALL_VIOL:
+            self.since = 0  # only feasible iterates count toward a stall
+        elif f < self.best - STALL_REL * max(1.0, abs(self.best)):
+            self.best, self.since = f, 0
+        else:
+            self.since += 1
+        if self.since >= self.patience and viol <= STALL_VIOL:
+            self.stalled = True
+            return [1]
+        return [0]
 
 
 def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
@@ -239,11 +315,17 @@ def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     return mask
 
 
+FREE_WEIGHT_MIN = 0.05  # B-spline weight of the free control points below which a point counts as held
+
+
 def _depends_on_free(n_ctrl: int, s: float, mask: np.ndarray, other_free: bool) -> bool:
-    """Whether a kinematic constraint at canonical time s can change: some control point
-    under s is free (or another block it depends on is).  Constraints that depend on held
-    values only are not constraints of this step (outside a window they are constants)."""
-    return other_free or bool(np.any(mask[np.abs(basis(n_ctrl, [s])[0]) > 1e-12]))
+    """Whether a kinematic constraint at canonical time s is a constraint of this step: the
+    free control points under s carry at least FREE_WEIGHT_MIN of its B-spline weight (or
+    another block it depends on is free).  Constraints on held values are constants; ones
+    at the very edge of a window, where a single free control point enters with a tiny
+    weight, are nearly so — several of them on one control point make the constraint
+    Jacobian nearly rank-deficient (IPOPT then stops with "Error in step computation")."""
+    return other_free or float(np.sum(basis(n_ctrl, [s])[0][mask])) >= FREE_WEIGHT_MIN
 
 
 def _lambda_guess(sp: Subproblem, planted: list, s: np.ndarray, mg: float) -> np.ndarray:
@@ -364,7 +446,8 @@ def build(sp: Subproblem) -> Built:
 
     # contacts: (handle, k) pairs planted by footsteps, λ per pair
     planted = []  # (handle, k, target xy expr, step index): contact force at grid point k
-    pins = []  # (handle, s, target xy expr): footstep position constraints
+    pins = []  # (handle, s, target xy expr[, "xy"]): footstep position constraints
+    anchored = set()  # free footsteps already tied to a held point (one such pin each: more are redundant)
     for si, step in enumerate(sp.footsteps):
         for handle, (ta, tb), xy in planted_handles(si, step):
             sa, sb = m.to_canonical([ta, tb])
@@ -372,8 +455,11 @@ def build(sp: Subproblem) -> Built:
             for k in ks:
                 planted.append((handle, int(k), xy, si))
             for v in s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]:
-                if _depends_on_free(K, v, mask, warp_free or si in free_steps):
+                if _depends_on_free(K, v, mask, warp_free):
                     pins.append((handle, float(v), xy))
+                elif si in free_steps and si not in anchored:
+                    pins.append((handle, float(v), xy))
+                    anchored.add(si)
     if sp.cyclic:
         pins = _drop_cyclic_duplicates(pins)
     n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
@@ -397,6 +483,24 @@ def build(sp: Subproblem) -> Built:
     Qd = Q1 / ca.repmat(T1, N_DOF, 1)
     Qdd = Q2 / ca.repmat(T1 ** 2, N_DOF, 1) - Q1 * ca.repmat(T2 / T1 ** 3, N_DOF, 1)
 
+    hk_names = tuple(sorted({t.handle for t in sp.targets} | {a.handle for a in sp.avoid}
+                            | {sg.handle for sg in sp.springs}
+                            | set(CONTACT_HANDLES) | {"ankle_l", "ankle_r"}))
+    hk = handles_kernel(ch, hk_names)
+    HP = hk.map(N)(Q)  # (3*len, N)
+    spring_force = []  # (3, N) world force of each spring at the collocation points
+    for sg in sp.springs:
+        i = hk_names.index(sg.handle)
+        pts = np.asarray(sg.points, float).reshape(-1, 3)
+        anchor = np.stack([np.interp(t_init, sg.times, pts[:, c]) for c in range(3)])
+        on = ((t_init >= sg.times[0] - 1e-9) & (t_init <= sg.times[-1] + 1e-9)).astype(float)
+        f = sg.stiffness * (ca.DM(anchor) - HP[3 * i:3 * i + 3, :]) * ca.repmat(ca.DM(on).T, 3, 1)
+        place = np.zeros((3 * len(FORCE_HANDLES), 3))
+        r0 = 3 * FORCE_HANDLES.index(sg.handle)
+        place[r0:r0 + 3, :] = np.eye(3)
+        Fc = Fc + ca.mtimes(_sparse(place), f)
+        spring_force.append(f)
+
     kern = compiled_kernel(ch).map(N)
     QQ = kern(Q, Qd, Qdd, Fc, TH)  # (35, N)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
@@ -411,10 +515,6 @@ def build(sp: Subproblem) -> Built:
     if sp.dynamics == "kinematic":  # stay close to the initial motion; no dynamics at all
         rho_dyn = ca.vec(P_flat - P_fixed) * KIN_WEIGHT
     rho_extra = [1e-3 * xL]  # tiny λ regularisation keeps the contact split well posed
-    hk_names = tuple(sorted({t.handle for t in sp.targets} | {a.handle for a in sp.avoid}
-                            | set(CONTACT_HANDLES) | {"ankle_l", "ankle_r"}))
-    hk = handles_kernel(ch, hk_names)
-    HP = hk.map(N)(Q)  # (3*len, N)
 
     def state_at(t):
         sk = float(m.to_canonical([t])[0])
@@ -456,9 +556,11 @@ def build(sp: Subproblem) -> Built:
     if pins:
         s_pin = np.array([pn[1] for pn in pins])
         HPp = hk.map(len(pins))(ca.mtimes(_sparse(basis(K, s_pin, 0)), P).T)
-        rows = [(HPp[3 * hk_names.index(pn[0]):3 * hk_names.index(pn[0]) + 3, c]
-                 - ca.vertcat(pn[2][0], pn[2][1], sp.ground.z(pn[2][0], pn[2][1])))[:2 if len(pn) > 3 else 3]
-                for c, pn in enumerate(pins)]
+        rows = []
+        for c, pn in enumerate(pins):
+            d = (HPp[3 * hk_names.index(pn[0]):3 * hk_names.index(pn[0]) + 3, c]
+                 - ca.vertcat(pn[2][0], pn[2][1], sp.ground.z(pn[2][0], pn[2][1])))
+            rows.append(d[:2] if len(pn) > 3 else d)  # "xy": the height is implied (cyclic end)
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
     # ground non-penetration of every foot handle at every point
     if sp.soft_pin_hz > 0 and pins:
@@ -495,7 +597,12 @@ def build(sp: Subproblem) -> Built:
     if not sp.ground.flat:  # height above the terrain under each handle
         ground = ground - ca.vertcat(*[sp.ground.z(HPc[3 * hk_names.index(h), :], HPc[3 * hk_names.index(h) + 1, :])
                                        for h in CONTACT_HANDLES])
-    add("penetration", ground, 0.0, np.inf, "ineq")
+    # a handle pinned to the ground at a point already has its height fixed there: a second,
+    # identical (active) row would make the constraint Jacobian rank-deficient
+    pinned_z = {(pn[0], round(pn[1], 9)) for pn in pins if len(pn) == 3}
+    keep = [k * len(CONTACT_HANDLES) + i for k, v in enumerate(s_gnd) for i, h in enumerate(CONTACT_HANDLES)
+            if (h, round(float(v), 9)) not in pinned_z]
+    add("penetration", ca.vec(ground)[keep], 0.0, np.inf, "ineq")
     # feet not crossing: left ankle stays left of the right one, in the pelvis heading frame
     yaw = Q[3, :]
     dl = HP[3 * hk_names.index("ankle_l"):3 * hk_names.index("ankle_l") + 2, :] - \
@@ -564,6 +671,11 @@ def build(sp: Subproblem) -> Built:
     }
     opts["ipopt"].update(dict(sp.ipopt_options))
     opts.update(dict(sp.nlpsol_options))
+    monitor = None
+    if sp.stall_iterations > 0:
+        monitor = StallMonitor(x.shape[0], gg.shape[0], np.asarray(lbg, float), np.asarray(ubg, float),
+                               sp.stall_iterations)
+        opts["iteration_callback"] = monitor
     solver = ca.nlpsol("spacetime", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
 
     th = theta_kernel_vector(sp.style)
@@ -578,7 +690,8 @@ def build(sp: Subproblem) -> Built:
         TH0, SA0 = np.tile(th[:, None], (1, N)), np.tile(sa[:, None], (1, N))
     pv = np.concatenate([ctrl0.ravel(), np.asarray(m.warp, float), TH0.ravel(order="F"), SA0.ravel(order="F")])
 
-    unpack = ca.Function("unpack", [x, p], [P, warp, xF, energy, root_energy])
+    springs_out = ca.vertcat(*spring_force) if spring_force else ca.MX(0, N)
+    unpack = ca.Function("unpack", [x, p], [P, warp, xF, energy, root_energy, springs_out])
     return Built(sp, solver, np.concatenate([np.ravel(a) for a in x0]),
                  np.concatenate([np.ravel(a) for a in lbx]), np.concatenate([np.ravel(a) for a in ubx]),
                  np.asarray(lbg, float), np.asarray(ubg, float), pv, unpack, groups, s,
@@ -586,7 +699,7 @@ def build(sp: Subproblem) -> Built:
                                xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4))
                   for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
                  slice(xP.shape[0] + xW.shape[0] + xF.shape[0], x.shape[0]), free_steps,
-                 ca.Function("g", [x, p], [gg]), tuple(Vc))
+                 ca.Function("g", [x, p], [gg]), tuple(Vc), tuple(sg.handle for sg in sp.springs), monitor)
 
 
 def violations(b: Built, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:
@@ -608,7 +721,7 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     sol = b.solver(x0=b.x0, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, p=b.p)
     stats = b.solver.stats()
     x = np.asarray(sol["x"]).ravel()
-    P, W, F, E, E0 = (np.asarray(v) for v in b.unpack(x, b.p))
+    P, W, F, E, E0, FS = (np.asarray(v) for v in b.unpack(x, b.p))
     F = F.ravel()
     motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
     steps = list(sp.footsteps)
@@ -621,7 +734,24 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
         V = b.contact_basis[c] if b.contact_basis else friction_basis()
         forces.setdefault(h, []).append((float(motion.time([b.s_points[k]])[0]), mg * V @ x[sl]))
     contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
+    t_pts = motion.time(b.s_points)
+    for j, h in enumerate(b.spring_handles):  # spring forces count as external forces at their handle
+        fj = FS[3 * j:3 * j + 3, :].T
+        on = np.any(fj != 0.0, axis=1)
+        if h in contact:
+            t_old, f_old = contact[h]
+            t_all = np.unique(np.r_[t_old, t_pts[on]])
+            f_all = np.zeros((len(t_all), 3))
+            for tt, ff in zip(t_old, f_old):
+                f_all[np.argmin(np.abs(t_all - tt))] += ff
+            for tt, ff in zip(t_pts[on], fj[on]):
+                f_all[np.argmin(np.abs(t_all - tt))] += ff
+            contact[h] = (t_all, f_all)
+        elif on.any():
+            contact[h] = (t_pts[on], fj[on])
     status = stats.get("return_status", "unknown")
     ok = bool(stats.get("success", False)) or status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    if b.monitor is not None and b.monitor.stalled and status == "User_Requested_Stop":
+        status, ok = "Stalled", True
     return Result(motion, tuple(steps), status, ok, int(stats.get("iter_count", -1)),
                   _time.perf_counter() - t_start, float(np.ravel(E)[0]), float(np.ravel(sol["f"])[0]), viol, contact, sp.label)

@@ -41,7 +41,7 @@ import numpy as np
 from scenarios.errors import ComposeError, InputError
 from scenegraph.footsteps import Footstep
 from scenegraph.motion import Motion
-from scenegraph.scene import Scene, coupling_targets, goal_targets, handle_track
+from scenegraph.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.spacetime import HandleTarget, Subproblem, _window_mask, solve
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
@@ -55,6 +55,7 @@ STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
 FORMAT = 1  # run-folder format
 START_WEIGHT = 100.0
+STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
 
 
 class StepFailed(ComposeError):
@@ -167,10 +168,12 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
         steps = tuple(f if (whole or (f.t0 >= win[0] - 1e-6 and f.t1 <= win[1] + 1e-6)) else replace(f, free=False)
                       for f in steps)
     targets, avoid = goal_targets(scene, who, step.goals)
+    springs = ()
     for cname in step.couplings:
         w = step.term(f"coupling:{cname}")
         if isinstance(w, (int, float)):
             targets += coupling_targets(scene, who, cname, float(w), win)
+            springs += coupling_springs(scene, who, cname, float(w), win)
     if step.term("start") is not None and win[0] <= m.start + 1e-9:
         x, y, _ = st.start
         z = float(handle_track(st, "pelvis", [m.start])[0][2])
@@ -180,9 +183,9 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
     if style_end is style:
         style_end = None
     sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
-                    dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid,
+                    dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid, springs=springs,
                     style_end=style_end, max_iter=_max_iter(300 if step.kind == FULL else 100),
-                    label=step.id.replace("/", "_"), ground=scene.ground)
+                    label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS)
     mask = None if whole else _window_mask(sp, m.n_ctrl)
     return sp, mask
 

@@ -134,7 +134,7 @@ ERRORS = [
     # (yaml, expected prefix "line:col field", message fragment)
     ("name: t\nduration: -2\ncharacters:\n  - name: a\n", "2:11 duration", "greater than 0"),
     (BASE + "    style: dfault\n", "6:12 characters[1].style",
-     "unknown style 'dfault' (known: default); did you mean 'default'?"),
+     "unknown style 'dfault' (known: default, "),
     (BASE + "goals:\n  - type: walk_to\n    character: carol\n    target: [1, 0]\n    time: 1\n",
      "8:16 goals[0].character", "unknown character 'carol' (known: alice, bob)"),
     (BASE + "goals:\n  - type: walk_to\n    character: bob\n    target: [1, 0]\n    time: 2.5\n",

@@ -18,9 +18,10 @@ STYLE = default_style(CH.total_mass)
 @pytest.fixture(scope="module")
 def walk():
     steps = footsteps_for_walk()  # four footprints, 0.7 m steps at 1.85 steps/s ≈ 1.3 m/s
-    # soft footprint springs at 120 Hz keep planted feet still between collocation points,
-    # ground constraints at 60 Hz keep swinging toes above the ground between them
-    return steps, synthesize(CH, STYLE, steps, steps[1].t0, steps[-1].t0, soft_pin_hz=120.0, ground_hz=60.0)
+    # soft footprint springs and a one-sided soft ground at 120 Hz keep planted feet still and
+    # swinging toes above the ground between the collocation points
+    return steps, synthesize(CH, STYLE, steps, steps[1].t0, steps[-1].t0, soft_pin_hz=120.0,
+                             soft_ground_hz=120.0, soft_ground_weight=1e4)
 
 
 def test_walk_cycle_converges_and_passes_the_audit(walk):
@@ -107,3 +108,36 @@ def test_run_with_flight_phases():
     q0, q1 = res.motion.canonical([0.0, 1.0])
     assert q1[0] - q0[0] == pytest.approx(2.0, abs=1e-3)
     np.testing.assert_allclose(q1[2:], q0[2:], atol=1e-6)
+
+
+def test_spring_force_enters_the_dynamics():
+    """A physical spring (rubber-band coupling) pulls the right palm toward a moving anchor:
+    the solver's force is k (anchor − palm) at every collocation point, and the independent
+    audit balances the equations of motion only when that force is counted."""
+    from scenegraph.audit import audit_motion
+    from scenegraph.kinematics import handle_positions_fn
+    from scenegraph.spacetime import Spring
+
+    steps = footsteps_for_walk()
+    t0, t1 = steps[1].t0, steps[-1].t0
+    m0 = initial_motion(CH, steps, t0, t1)
+    times = np.linspace(t0, t1, 40)
+    q, _, _ = m0.state_at_s(m0.to_canonical(times))
+    palm = np.asarray(handle_positions_fn(CH, ("palm_r",)).map(len(times))(q.T)).T
+    anchor = palm + np.array([0.0, -0.08, 0.0])  # 8 cm to the right of the initial palm path
+    k = 400.0
+    spring = Spring("palm_r", tuple(times), tuple(map(tuple, anchor)), k)
+    syn = synthesize(CH, STYLE, steps, t0, t1, springs=(spring,))
+    res = syn.result
+    assert res.success, res.summary()
+    ft, ff = res.contact_forces["palm_r"]
+    qs, _, _ = res.motion.state_at_s(res.motion.to_canonical(ft))
+    pos = np.asarray(handle_positions_fn(CH, ("palm_r",)).map(len(ft))(qs.T)).T
+    expect = k * (np.stack([np.interp(ft, times, anchor[:, c]) for c in range(3)], axis=1) - pos)
+    np.testing.assert_allclose(ff, expect, atol=1e-6)
+    assert np.abs(ff).max() > 5.0  # a real pull, not a vanishing one
+    with_force = syn.audit
+    without = audit_motion(CH, STYLE, res.motion, res.footsteps,
+                           {h: v for h, v in res.contact_forces.items() if h != "palm_r"})
+    assert with_force.root_residual_rel <= 1e-3, with_force
+    assert without.root_residual_max > 3 * with_force.root_residual_max + 1.0
