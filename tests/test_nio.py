@@ -101,6 +101,15 @@ def test_resample_keeps_the_motion(small):
     assert joint_rms_deg(r, coarse) < 0.5  # measured 0.29° (the knots are not nested; the fit is smoothed)
 
 
+def test_flight_phase_detection():
+    """Runs (flight phases) get ball-only footsteps in `compose learn`; walks keep heel and ball."""
+    from schedules.cli_learn import _has_flight
+    walk = footsteps_for_walk(n_steps=4)
+    run = footsteps_for_walk(n_steps=4, step_length=1.0, cadence=2.8, stance_fraction=0.38, gait="run")
+    assert not _has_flight(walk, walk[0].t0, walk[-1].t1)
+    assert _has_flight(run, run[0].t0, run[-1].t1)
+
+
 def test_local_counterexample_lowers_energy_within_C():
     """The Gauss–Newton counterexample (local NIO) of a motion that satisfies C: lower energy,
     C kept to feas_tol, and G(θ) = E(X_T) − E(X_S) ≥ 0 with a finite Eq. 21 gradient."""
