@@ -403,13 +403,11 @@ class NIO:
         fgrad, fhess, fjac = self._fns
         p = self._params(theta)
         x = b.x0.copy()
-        nq = start.ctrl.size
-        x[:nq] = np.asarray(start.ctrl, float).ravel()
+        x[:start.ctrl.size] = np.asarray(start.ctrl, float).ravel()  # NIO frees every control point
         x[b.lam_slice] = lam0
         _, gf = fgrad(x, p)
         gf = np.asarray(gf, float).ravel()
-        Hu = fhess(x, p, 1.0, np.zeros(b.lbg.size))
-        Hu = sps.csc_matrix(Hu.sparse()) if hasattr(Hu, "sparse") else sps.csc_matrix(np.asarray(Hu))
+        Hu = sps.csc_matrix(fhess(x, p, 1.0, np.zeros(b.lbg.size)).sparse())  # upper triangle
         H = Hu + Hu.T - sps.diags(Hu.diagonal())
         gv, Jg = fjac(x, p)
         gv = np.asarray(gv, float).ravel()
