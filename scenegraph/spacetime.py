@@ -754,4 +754,4 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     if b.monitor is not None and b.monitor.stalled and status == "User_Requested_Stop":
         status, ok = "Stalled", True
     return Result(motion, tuple(steps), status, ok, int(stats.get("iter_count", -1)),
-                  _time.perf_counter() - t_start, float(np.ravel(E)[0]), float(np.ravel(sol["f"])[0]), viol, contact, sp.label)
+                  _time.perf_counter() - t_start, float(np.ravel(E)[0]), float(sol["f"]), viol, contact, sp.label)
