@@ -307,3 +307,23 @@ def test_list_command(capsys):
     for name in BUNDLED:
         assert re.search(rf"^  {name}\s+\S", out, re.M), name
     assert re.search(r"^  default\s+built-in", out, re.M)
+
+
+def test_gait_change_generates_walk_then_run_footsteps():
+    """`style_change` with `gait: run`: double support before the change, flight phases and
+    quicker, longer steps after it; the footsteps still reach the walk_to target."""
+    from scenarios.loader import load_scenario
+    from scenegraph.scene import build_scene
+
+    scene = build_scene(load_scenario("walk_to_run"))
+    steps = sorted(scene.characters[0].footsteps, key=lambda f: f.t0)
+    early = [f for f in steps if f.t1 < 0.9]
+    late = [f for f in steps if f.t0 > 1.2]
+    assert early and late
+    assert all(f.heel is not None for f in early) and all(f.heel is None for f in late)
+    gaps = [b.t0 - a.t1 for a, b in zip(steps, steps[1:])]
+    assert any(g < 0 for g, a in zip(gaps, steps) if a.t1 < 0.9)  # double support while walking
+    assert all(g > 0.02 for g, a in zip(gaps, steps) if a.t0 > 1.2)  # flight while running
+    lengths = [b.position[0] - a.position[0] for a, b in zip(steps, steps[1:])]
+    assert lengths[-1] > 1.4 * lengths[0]
+    assert 4.4 - 1.2 < steps[-1].position[0] < 4.4  # the last landing is one run step short of the end
