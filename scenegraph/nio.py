@@ -814,7 +814,7 @@ def resample(motion: Motion, ctrl_per_second: float = 24.0, fps: float = 120.0) 
 
 
 def feasible_target(ch: Character, motion: Motion, footsteps: tuple[Footstep, ...], *, cyclic: bool = False,
-                    weight: float = 1.0, hz: float = 30.0, max_iter: int = 400, tol: float = 1e-6) -> Result:
+                    weight: float = 1.0, hz: float = 30.0, max_iter: int = 1500, tol: float = 1e-6) -> Result:
     """X_T for NIO from a reconstructed clip: the motion closest to ``motion`` that satisfies
     the footstep constraints C exactly, with the root residual softly zero (Appendix A):
 
