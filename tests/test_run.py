@@ -156,7 +156,7 @@ def test_two_walkers_jobs_2_equals_jobs_1(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["walk_to", "two_walkers", pytest.param("walk_to_run", marks=pytest.mark.xfail(
-    strict=True, reason="cycle 2 of the time-layered schedule stops at its iteration cap (README: Status)"))])
+    strict=True, reason="the seam steps across the walk→run gait change do not converge (README: Status)"))])
 def test_bundled_scenarios_run_end_to_end(name, tmp_path):
     from scenegraph.usd_export import readback_errors
 
