@@ -30,7 +30,7 @@ import pytest
 
 from scenarios.loader import load_scenario
 from scenegraph.audit import audit_motion
-from scenegraph.body import N_ROOT, make_character, standing_pose
+from scenegraph.body import make_character, standing_pose
 from scenegraph.dynamics import MU, friction_basis
 from scenegraph.footsteps import Footstep, contact_points
 from scenegraph.ground import FLAT, Ground, Plane, ground_from_environment
