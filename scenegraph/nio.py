@@ -67,8 +67,8 @@ from .body import G, N_DOF, N_JOINT, N_ROOT, Character
 from .dynamics import friction_basis
 from .footsteps import Footstep
 from .motion import Motion
-from .spacetime import (FORCE_HANDLES, OBJ_SCALE, W_ROOT, Built, Result, Subproblem, build,
-                        residual_kernel, solve, violations)
+from .spacetime import (FORCE_HANDLES, OBJ_SCALE, W_ROOT, Built, IterationCallback, Result, Subproblem,
+                        build, residual_kernel, solve, violations)
 from .style import Provenance, Style, default_style
 
 __all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style", "joint_rms_deg",
@@ -148,49 +148,23 @@ def _force_jacobian(ch: Character) -> ca.Function:
     return ca.Function("dQdf", [q, qd, qdd, f, th], [Q, ca.jacobian(Q, f)])
 
 
-class _BestIterate(ca.Callback):
+class _BestIterate(IterationCallback):
     """IPOPT iteration callback keeping the lowest-objective iterate that satisfies the
     constraints to ``tol``: IPOPT is not monotone in the objective, and a counterexample
     solve that stops at its iteration limit can end worse than it began."""
 
     def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray, tol: float):
-        ca.Callback.__init__(self)
-        self.nx, self.ng, self.lbg, self.ubg, self.tol = nx, ng, lbg, ubg, tol
+        self.tol = tol
         self.reset()
-        self.construct("nio_best_iterate", {})
+        super().__init__("nio_best_iterate", nx, ng, lbg, ubg)
 
     def reset(self):
         self.best_f, self.best_x = np.inf, None
 
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "ret"
-
-    def get_sparsity_in(self, i):
-        n = ca.nlpsol_out(i)
-        if n == "f":
-            return ca.Sparsity.scalar()
-        if n in ("x", "lam_x"):
-            return ca.Sparsity.dense(self.nx)
-        if n in ("g", "lam_g"):
-            return ca.Sparsity.dense(self.ng)
-        return ca.Sparsity(0, 0)
-
     def eval(self, arg):
         f = float(arg[1])
-        if f < self.best_f:
-            g = np.asarray(arg[2]).ravel()
-            viol = float(np.max(np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0), initial=0.0))
-            if viol <= self.tol:
-                self.best_f, self.best_x = f, np.asarray(arg[0]).ravel().copy()
+        if f < self.best_f and self.violation(arg[2]) <= self.tol:
+            self.best_f, self.best_x = f, np.asarray(arg[0]).ravel().copy()
         return [0]
 
 

@@ -249,22 +249,15 @@ STALL_REL = 1e-6  # relative objective improvement that counts as progress
 STALL_VIOL = 1e-5  # worst constraint violation (m, or the constraint's unit) of a stalled iterate
 
 
-class StallMonitor(ca.Callback):
-    """IPOPT iteration callback: stop once ``patience`` consecutive iterates satisfy every
-    constraint to STALL_VIOL without improving the best feasible objective by STALL_REL
-    (relative).
+class IterationCallback(ca.Callback):
+    """Base of IPOPT iteration callbacks: receives nlpsol's outputs (x, f, g, multipliers) of
+    an NLP with ``nx`` variables and ``ng`` constraints; subclasses implement ``eval`` and
+    read ``violation(g)`` (worst violation of [lbg, ubg])."""
 
-    Windows whose held boundary leaves residuals that cannot vanish are large-residual least
-    squares; there the Gauss–Newton Hessian converges only linearly, and IPOPT can spend
-    hundreds of iterations on the last digits of a flat objective.  ``stalled`` records why
-    the solve stopped.
-    """
-
-    def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray, patience: int):
+    def __init__(self, name: str, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray):
         ca.Callback.__init__(self)
-        self.nx, self.ng, self.lbg, self.ubg, self.patience = nx, ng, lbg, ubg, patience
-        self.best, self.since, self.stalled = np.inf, 0, False
-        self.construct("stall_monitor", {})
+        self.nx, self.ng, self.lbg, self.ubg = nx, ng, np.asarray(lbg, float), np.asarray(ubg, float)
+        self.construct(name, {})
 
     def get_n_in(self):
         return ca.nlpsol_n_out()
@@ -279,14 +272,33 @@ class StallMonitor(ca.Callback):
         return "ret"
 
     def get_sparsity_in(self, i):
-        n = ca.nlpsol_out(i)
         size = {"f": (1, 1), "g": (self.ng, 1), "lam_g": (self.ng, 1), "p": (0, 0), "lam_p": (0, 0)}
-        return ca.Sparsity.dense(*size.get(n, (self.nx, 1)))
+        return ca.Sparsity.dense(*size.get(ca.nlpsol_out(i), (self.nx, 1)))
+
+    def violation(self, g) -> float:
+        g = np.asarray(g).ravel()
+        return float(np.max(np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0), initial=0.0))
+
+
+class StallMonitor(IterationCallback):
+    """IPOPT iteration callback: stop once ``patience`` consecutive iterates satisfy every
+    constraint to STALL_VIOL without improving the best feasible objective by STALL_REL
+    (relative).
+
+    Windows whose held boundary leaves residuals that cannot vanish are large-residual least
+    squares; there the Gauss–Newton Hessian converges only linearly, and IPOPT can spend
+    hundreds of iterations on the last digits of a flat objective.  ``stalled`` records why
+    the solve stopped.
+    """
+
+    def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray, patience: int):
+        self.patience = patience
+        self.best, self.since, self.stalled = np.inf, 0, False
+        super().__init__("stall_monitor", nx, ng, lbg, ubg)
 
     def eval(self, arg):
         f = float(arg[ca.nlpsol_out().index("f")])
-        g = np.asarray(arg[ca.nlpsol_out().index("g")]).ravel()
-        viol = float(np.max(np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0))) if g.size else 0.0
+        viol = self.violation(arg[ca.nlpsol_out().index("g")])
         if viol > STALL_VIOL:
             self.since = 0  # only feasible iterates count toward a stall
         elif f < self.best - STALL_REL * max(1.0, abs(self.best)):
