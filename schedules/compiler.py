@@ -19,7 +19,9 @@ How the schedule is chosen (``schedule.kind: auto``, the default):
    ``max_window`` or a style changes over time: windows abut at every style change and
    are split to at most ``max_window``; each cycle solves the windows, then a seam window C
    straddling every boundary; θ is interpolated linearly across the seam (or across the
-   style change's ``blend``).
+   style change's ``blend``).  When the duration fits one window (the layers come from a
+   style change), the timing step is solved once over the whole duration before the
+   windows, which then get full steps only.
 3. Every subproblem uses the **timewarp** schedule: a ``timing`` Step (timewarp and free
    placements, dynamics relaxed) then a ``full`` Step (dynamics hard).
 
@@ -66,6 +68,7 @@ class _Block:
     stiffness: float | None = None
     seam: float | None = None
     repeat: int = 1
+    kinds: tuple[str, ...] | None = None  # Step kinds of the block; None: the timewarp schedule's
     steps: list[Step] = field(default_factory=list)
 
     def reads(self) -> set[str]:
@@ -272,7 +275,7 @@ def _free(st: _Structure, b: _Block, kind: str, timewarp: bool, has_hard_couplin
 
 def _steps_of(st: _Structure, b: _Block, group: str, styles: dict[str, StyleTimeline]) -> list[Step]:
     timewarp = st.spec.timewarp
-    kinds = [TIMING, FULL] if timewarp else [FULL]
+    kinds = list(b.kinds) if b.kinds is not None else [TIMING, FULL] if timewarp else [FULL]
     chars = "+".join(b.characters)
     rep = f"#{b.repeat}" if b.repeat > 1 else ""
     out = []
@@ -380,6 +383,22 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
     reps = {m: spec.solves_per_cycle.get(m, 1) if mode == "coupled" else 1 for m in members}
     sched = tuple(kinds)
     blocks: list[_Block] = []
+    window_kinds = None
+    if layered and spec.timewarp and len(windows) > 1 and T <= spec.max_window + EPS:
+        # The timewarp is global (a windowed step holds the warp its neighbours see), so a
+        # time-layered branch solves its timing once over the whole duration, with relaxed
+        # dynamics; that also makes the windows' held boundaries consistent before their
+        # full solves (starting the windows from the kinematic initial motion left them
+        # pinned to boundary states with root residuals of ~2 mg).  Only when the whole
+        # fits one window: longer branches keep a timing step per window.
+        reasons.append("timing solved once over the whole duration, then full steps per window")
+        window_kinds = (FULL,)
+        whole = [tuple(sorted(members))] if mode == "joint_layered" else [(m,) for m in order]
+        for chars in whole:
+            blocks.append(_Block(chars, (0.0, T), 1, "whole", "whole", sched, couplings="hard"
+                                 if mode == "joint_layered" else "spring",
+                                 observes=_observed(st, chars[0], members, (0.0, T)) if alternating else (),
+                                 stiffness=spec.stiffness(1) if alternating else None, kinds=(TIMING,)))
     for cycle in range(1, cycles + 1):
         stiffness = spec.stiffness(cycle) if alternating else None
         if mode == "adversarial":
@@ -396,12 +415,13 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
                         if reps[m] >= r:
                             blocks.append(_Block((m,), window, cycle, role, label, sched,
                                                  observes=_observed(st, m, members, window),
-                                                 stiffness=stiffness, seam=seam_t, repeat=r))
+                                                 stiffness=stiffness, seam=seam_t, repeat=r, kinds=window_kinds))
             elif mode in ("joint", "joint_layered"):
                 blocks.append(_Block(tuple(sorted(members)), window, cycle, role, label, sched,
-                                     couplings="hard", seam=seam_t))
+                                     couplings="hard", seam=seam_t, kinds=window_kinds))
             else:
-                blocks.append(_Block((members[0],), window, cycle, role, label, sched, seam=seam_t))
+                blocks.append(_Block((members[0],), window, cycle, role, label, sched, seam=seam_t,
+                                     kinds=window_kinds))
     name = "+".join(sorted(members))
     group = Group(name, tuple(sorted(members)), sched + ((TIMEWARP,) if spec.timewarp else ()),
                   tuple(reasons), tuple(order))

@@ -57,6 +57,8 @@ FORMAT = 1  # run-folder format
 START_WEIGHT = 100.0
 STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
 SOFT_PIN_HZ = 120.0  # soft footprint springs of full steps: planted feet still between collocation points
+COUPLING_TARGET_HZ = 60.0  # rubber-band target points per second (at 10 Hz the hands met at the
+# target points and parted by up to 9 cm between them)
 
 
 class StepFailed(ComposeError):
@@ -168,12 +170,12 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
         # only footsteps entirely inside the window move; the rest are held where they are
         steps = tuple(f if (whole or (f.t0 >= win[0] - 1e-6 and f.t1 <= win[1] + 1e-6)) else replace(f, free=False)
                       for f in steps)
-    targets, avoid = goal_targets(scene, who, step.goals)
+    targets, avoid = goal_targets(scene, who, step.goals, window=win)  # window: tackle/avoid reaction time
     springs = ()
     for cname in step.couplings:
         w = step.term(f"coupling:{cname}")
         if isinstance(w, (int, float)):
-            targets += coupling_targets(scene, who, cname, float(w), win)
+            targets += coupling_targets(scene, who, cname, float(w), win, rate=COUPLING_TARGET_HZ)
             springs += coupling_springs(scene, who, cname, float(w), win)
     if step.term("start") is not None and win[0] <= m.start + 1e-9:
         x, y, _ = st.start
@@ -260,7 +262,8 @@ def _apply(scene: Scene, data: dict) -> Scene:
 
 
 def _merge_contacts(old: dict | None, new: dict, window) -> dict:
-    """Contact forces of a windowed step replace the old ones inside its window only."""
+    """Contact forces of a windowed step replace the old ones inside its window only (outside
+    it the motion is unchanged, and so are the forces that balance it)."""
     if window is None or not old:
         return new
     out = {}
@@ -271,9 +274,11 @@ def _merge_contacts(old: dict | None, new: dict, window) -> dict:
             keep = (t < window[0] - 1e-9) | (t > window[1] + 1e-9)
             ts.append(t[keep])
             fs.append(np.asarray(f).reshape(-1, 3)[keep])
-        if h in new:
-            ts.append(new[h][0])
-            fs.append(np.asarray(new[h][1]).reshape(-1, 3))
+        if h in new:  # a windowed subproblem reports forces at all its points: keep its window's
+            t, f = np.asarray(new[h][0], float), np.asarray(new[h][1]).reshape(-1, 3)
+            inside = (t >= window[0] - 1e-9) & (t <= window[1] + 1e-9)
+            ts.append(t[inside])
+            fs.append(f[inside])
         t, f = np.concatenate(ts), np.concatenate(fs)
         o = np.argsort(t, kind="stable")
         out[h] = (t[o], f[o])

@@ -72,8 +72,20 @@ def test_general_properties(name):
     pos = {st.id: i for i, st in enumerate(order)}
     assert len(pos) == len(s) == g.number_of_nodes()
     assert all(pos[a] < pos[b] for a, b in g.edges()), "order() must be a topological order"
-    # timewarp schedule for every subproblem: timing (relaxed dynamics) then full (hard dynamics)
+    # timewarp schedule for every subproblem: timing (relaxed dynamics) then full (hard dynamics);
+    # a time-layered branch solves its timing once over the whole duration, its windows full only
+    layered = {gr.name for gr in s.groups if TIME_LAYERED in gr.kinds
+               if any(st.role == "whole" and st.group == gr.name for st in order)}
     for block, steps in _blocks(s).items():
+        if steps[0].group in layered:
+            kinds = [st.kind for st in steps]
+            assert kinds == (["timing"] if steps[0].role == "whole" else ["full"]), block
+            if steps[0].role == "whole":
+                (timing,) = steps
+                assert timing.window == (0.0, load_scenario(name).duration) and "timewarp" in timing.free
+                later = [st for st in order if set(st.characters) & set(timing.characters) and st is not timing]
+                assert all(s.has_path(timing.id, st.id) for st in later)
+            continue
         assert [st.kind for st in steps] == ["timing", "full"], block
         timing, full = steps
         assert g.has_edge(timing.id, full.id)
@@ -125,23 +137,26 @@ def test_independent_characters_have_no_path_between_their_steps():
 def test_time_layered_seam_runs_after_both_windows():
     s = _compile("walk_to_run")
     steps = s.order()
+    whole = s.step("runner/c1/whole/timing")
+    assert steps[0] is whole and whole.window == (0.0, 2.0) and "timewarp" in whole.free
     for cycle in (1, 2):
         w0 = s.step(f"runner/c{cycle}/w0/full")
         w1 = s.step(f"runner/c{cycle}/w1/full")
-        seam = s.step(f"runner/c{cycle}/seam0/timing")
+        seam = s.step(f"runner/c{cycle}/seam0/full")
+        assert s.has_path(whole.id, w0.id) and s.has_path(whole.id, w1.id)
         assert w0.window[1] == w1.window[0] == 1.0  # windows abut at the style change
         assert seam.window[0] < 1.0 < seam.window[1] and seam.seam == 1.0 and seam.role == "seam"
         assert s.has_path(w0.id, seam.id) and s.has_path(w1.id, seam.id)
         # A and B of one cycle are independent
-        assert not s.has_path(w0.id, f"runner/c{cycle}/w1/timing")
-        assert not s.has_path(w1.id, f"runner/c{cycle}/w0/timing")
+        assert not s.has_path(w0.id, w1.id) and not s.has_path(w1.id, w0.id)
         # endpoint conditions from the neighbours
         assert w0.term("boundary:end") == "hard" and w0.term("start") == "hard"
         assert w1.term("boundary:start") == "hard" and w1.term("boundary:end") is None
         assert seam.term("boundary:start") == seam.term("boundary:end") == "hard"
+        assert all(st.kind == "full" for st in (w0, w1, seam))
     # the next cycle's windows run after the previous seam
-    assert s.has_path("runner/c1/seam0/full", "runner/c2/w0/timing")
-    assert s.has_path("runner/c1/seam0/full", "runner/c2/w1/timing")
+    assert s.has_path("runner/c1/seam0/full", "runner/c2/w0/full")
+    assert s.has_path("runner/c1/seam0/full", "runner/c2/w1/full")
     # θ interpolated across the seam window
     seam = s.step("runner/c1/seam0/full")
     (timeline,) = seam.styles
