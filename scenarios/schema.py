@@ -331,7 +331,11 @@ class TackleGoal(_Model):
     attacker: str = Field(description="character who tackles")
     target: str = Field(description="character who is tackled")
     time: Seconds = Field(description="impact time (s)")
-    min_speed: Num = Field(2.0, ge=0.0, le=15.0, description="attacker's chest speed toward the target at impact (m/s)")
+    min_speed: Num = Field(2.0, ge=0.0, le=15.0, description="lower bound of the closing speed at impact (m/s); "
+                                                           "used when `speed` is not given")
+    speed: Num | None = Field(None, gt=0.0, le=15.0,
+                              description="closing speed at impact (m/s): the attacker's chest front toward the "
+                                          "target's torso, relative to it; holds within ±10 %")
     hands_around_torso: Annotated[bool, Strict()] = Field(True, description="wrap both palms around the target's torso")
     plans_last: str | None = Field(None, description="who optimises last in the decreasing-horizon schedule "
                                                      "(attacker or target name); default: the attacker")

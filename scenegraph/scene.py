@@ -27,18 +27,28 @@ from .body import Character, make_character
 from .footsteps import RUN_BALL, WALK_BALL, WALK_HEEL, Footstep
 from .gait import initial_motion
 from .ground import FLAT, Ground, ground_from_environment
-from .kinematics import handle_positions_fn
+from .kinematics import handle_positions_fn, numeric_fk
 from .motion import Motion
 from .spacetime import Avoid, HandleTarget, Spring
 from .style import Style, default_style, load_style
 
 __all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets",
-           "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH"]
+           "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH",
+           "adversarial_plans_last", "tackle_measure", "avoid_measure", "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL"]
 
 CADENCE = 1.85          # steps per second of generated walks
 STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
 FOOT_WIDTH = 0.18       # m, lateral distance between the feet of generated footsteps
 TARGET_WEIGHT = 300.0   # soft goal springs (1/m² of the normalised objective)
+TACKLE_CONTACT_TOL = 0.05  # m: the tackler's chest front within this of the target's torso surface
+TACKLE_SPEED_TOL = 0.10    # relative: closing speed within ±10 % of the goal speed
+TACKLE_SPEED_LEAD = 0.1    # s: the speed is asked for as a chest position this long before the impact
+AVOID_MARGIN = 0.08        # m: the escape target lies this far outside the avoided sphere
+REACH_ACCEL = 4.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
+#                            time from the start of the optimised window to the goal (reaction time)
+AVOID_LEAD = 0.05          # s: the escape is asked at the goal time and this long before it
+AVOID_WEIGHT = 300.0       # soft escape springs (same units as TARGET_WEIGHT; 1000 made IPOPT oscillate)
+TORSO_BODIES = ("thorax", "abdomen")
 
 
 @dataclass(frozen=True)
@@ -74,6 +84,17 @@ class GoalSpec:
     time: float | None        # s (None for footprints)
     tolerance: float          # m
     data: tuple = ()          # type-specific: (handle, point) for reach; (radius,) for avoid; ...
+    plans_last: str | None = None  # tackle / avoid: who plans last in the pair (decides the outcome)
+
+    @property
+    def expected_to_hold(self) -> bool | None:
+        """Adversarial goals (tackle, avoid): True for the side that plans last (it wins by
+        design of the decreasing-horizon schedule), False for the other; None otherwise."""
+        if self.type == "tackle":
+            return self.plans_last == self.character
+        if self.type == "avoid":
+            return self.plans_last == self.character
+        return None
 
 
 @dataclass(frozen=True)
@@ -83,7 +104,7 @@ class CouplingSpec:
     handles: tuple[tuple[str, str], ...]  # (character, handle)
     interval: tuple[float, float]
     mass: float = 0.0
-    tolerance: float = 0.03  # m: hands within this distance count as holding
+    tolerance: float = 0.01  # m: hands within this distance count as holding (issue #7: ≤ 1 cm)
 
 
 @dataclass(frozen=True)
@@ -197,7 +218,8 @@ def gait_footsteps(start_xy, target_xy, t0: float, t1: float, change: tuple[floa
     pelvis advances in proportion to ∫ cadence · step length dt, scaled to reach the target
     at t1; each foot lands under it (± width/2).  A stance is a walk's (heel, then ball) or
     a run's (ball only, flight between stances) by which gait dominates at its middle.
-    Without ``change`` the whole path uses ``before``.
+    Without ``change`` the whole path uses ``before`` and every footstep is free; with it only
+    the stances centred inside the blend are.
     """
     tc, blend, after = change or (t0, 0.0, before)
     g0, g1 = GAITS[before], GAITS[after]
@@ -230,8 +252,11 @@ def gait_footsteps(start_xy, target_xy, t0: float, t1: float, change: tuple[floa
         heel, ballf = _part(gg.heel, a, b, c, e), _part(gg.ball, a, b, c, e)
         if e - c < 0.04 or (heel is None and ballf is None):
             continue
+        # with a change, the footprints of the transition are placed by the solver; the
+        # walk's before it and the run's after it keep their gaits' spacing and timing
+        free = change is None or abs(tm - tc) <= blend / 2
         steps.append(Footstep(this, (float(ball[0]), float(ball[1])), float(c), float(e), heading,
-                              heel=heel, ball=ballf, free=True))
+                              heel=heel, ball=ballf, free=free))
     return tuple(steps)
 
 
@@ -292,6 +317,25 @@ def _explicit_footsteps(g: FootprintsGoal, default_heading: float, foot_length: 
     return out
 
 
+# --- adversarial pairs -----------------------------------------------------------------------
+
+def adversarial_plans_last(scn: Scenario) -> dict[frozenset, str]:
+    """Per adversarial pair (frozenset of two names): who plans last — the explicit
+    ``plans_last`` of any of the pair's goals (the schema keeps them consistent), else the
+    attacker (tackle) or the one avoided (avoid); the schedule compiler makes the same choice."""
+    choices: dict[frozenset, list[tuple[str | None, str]]] = {}
+    for g in scn.goals:
+        if isinstance(g, TackleGoal):
+            choices.setdefault(frozenset((g.attacker, g.target)), []).append((g.plans_last, g.attacker))
+        elif isinstance(g, AvoidGoal):
+            choices.setdefault(frozenset((g.character, g.around)), []).append((g.plans_last, g.around))
+    out = {}
+    for pair, cs in choices.items():
+        explicit = sorted({c for c, _ in cs if c is not None})
+        out[pair] = explicit[0] if explicit else sorted(d for _, d in cs)[0]
+    return out
+
+
 # --- build -----------------------------------------------------------------------------------
 
 def build_scene(scn: Scenario) -> Scene:
@@ -299,6 +343,7 @@ def build_scene(scn: Scenario) -> Scene:
     T = float(scn.duration)
     chars, refs = [], {}
     goals: list[GoalSpec] = []
+    last = adversarial_plans_last(scn)
     for name, g in scn.named_goals():
         if isinstance(g, ReachGoal):
             goals.append(GoalSpec(name, g.type, g.character, None, g.time, g.tolerance, (g.handle, tuple(g.target))))
@@ -306,14 +351,16 @@ def build_scene(scn: Scenario) -> Scene:
             goals.append(GoalSpec(name, g.type, g.character, None, g.time, g.tolerance,
                                   (tuple(g.target), None if g.heading is None else math.radians(g.heading))))
         elif isinstance(g, TackleGoal):
-            goals.append(GoalSpec(name, g.type, g.attacker, g.target, g.time, 0.15,
-                                  (g.min_speed, g.hands_around_torso)))
+            goals.append(GoalSpec(name, g.type, g.attacker, g.target, g.time, TACKLE_CONTACT_TOL,
+                                  (g.min_speed, g.hands_around_torso, g.speed),
+                                  plans_last=last[frozenset((g.attacker, g.target))]))
         elif isinstance(g, AvoidGoal):
-            goals.append(GoalSpec(name, g.type, g.character, g.around, g.time, 1e-3, (g.radius,)))
+            goals.append(GoalSpec(name, g.type, g.character, g.around, g.time, 1e-3, (g.radius,),
+                                  plans_last=last[frozenset((g.character, g.around))]))
         elif isinstance(g, FootprintsGoal):
             goals.append(GoalSpec(name, g.type, g.character, None, None, 2e-3))
         elif isinstance(g, StyleChangeGoal):
-            goals.append(GoalSpec(name, g.type, g.character, None, g.time, 0.0, (g.style,)))
+            goals.append(GoalSpec(name, g.type, g.character, None, g.time, 0.0, (g.style, g.gait, g.blend)))
     couplings = []
     for name, c in scn.named_couplings():
         if isinstance(c, HandHold):
@@ -373,6 +420,7 @@ def build_scene(scn: Scenario) -> Scene:
                 h = math.atan2(*(np.asarray(p) - np.asarray(start[:2]))[::-1]) if walk else start[2]
                 steps += list(standing_footsteps((p[0], p[1], h), t, T, fl))
         tackles = [g for g in scn.goals if isinstance(g, TackleGoal) and g.attacker == spec.name]
+        runner = False
         if tackles and not steps:  # run at where the target is at impact (its initial plan), then stand
             g = min(tackles, key=lambda g: g.time)
             other = next((c for c in chars if c.name == g.target), None)
@@ -382,13 +430,21 @@ def build_scene(scn: Scenario) -> Scene:
                 aim = np.asarray(scn.character(g.target).start.position, float)
             d = aim - np.asarray(start[:2])
             stop = aim - d / max(np.linalg.norm(d), 1e-6) * 0.35
-            steps += list(gait_footsteps(start[:2], stop, 0.0, g.time, foot_length=fl, before="run"))
-            if g.time < T - 1e-6:
-                steps += list(standing_footsteps((stop[0], stop[1], math.atan2(d[1], d[0])), g.time, T, fl))
+            # one run at constant speed through the impact point; a tackle before the end of
+            # the scenario keeps running on past it (a missed tackle does not stop dead)
+            end = np.asarray(start[:2]) + (stop - np.asarray(start[:2])) * T / max(g.time, 1e-6)
+            steps += list(gait_footsteps(start[:2], end, 0.0, T, foot_length=fl, before="run"))
+            runner = True
+        dodges = [g for g in scn.goals if (isinstance(g, AvoidGoal) and g.character == spec.name)
+                  or (isinstance(g, TackleGoal) and g.target == spec.name)]
+        if dodges and not steps:  # a target without a walk of its own: walks straight ahead (its initial plan)
+            u = np.array([math.cos(start[2]), math.sin(start[2])])
+            end = np.asarray(start[:2]) + u * GAITS["walk"].cadence * GAITS["walk"].step_length * T
+            steps += list(walk_footsteps(start[:2], end, 0.0, T, foot_length=fl))
         if not steps:
             steps = list(standing_footsteps(start, 0.0, T, fl))
         steps.sort(key=lambda f: (f.t0, f.foot))
-        run_from = change[0] if change is not None and change[2] == "run" else False
+        run_from = change[0] if change is not None and change[2] == "run" else runner
         motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground, run=run_from)
         chars.append(CharacterState(spec.name, ch, tuple(styles), tuple(steps), motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
@@ -411,8 +467,173 @@ def handle_track(state: CharacterState, handle: str, times) -> np.ndarray:
     return np.array([np.asarray(fn(qi)).ravel() for qi in q])
 
 
-def goal_targets(scene: Scene, character: str, goal_names) -> tuple[tuple[HandleTarget, ...], tuple[Avoid, ...]]:
-    """Solver terms for the named goals that bind ``character``, from the current Scene."""
+def _body_index(ch: Character, name: str) -> int:
+    return [b.name for b in ch.bodies].index(name)
+
+
+def body_frames(state: CharacterState, body: str, times) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations (n, 3, 3) and ellipsoid centres (n, 3) of one body along the motion."""
+    ch = state.character
+    q, _, _ = state.motion.at(np.clip(np.asarray(times, float), state.motion.start, state.motion.end))
+    R, p = numeric_fk(ch, np.atleast_2d(q))
+    i = _body_index(ch, body)
+    b = ch.bodies[i]
+    return R[:, i], p[:, i] + np.einsum("nij,j->ni", R[:, i], np.asarray(b.center))
+
+
+def chest_front(state: CharacterState, times) -> np.ndarray:
+    """(n, 3) the front of the thorax ellipsoid (its +x semi-axis end): a tackler's contact point."""
+    R, c = body_frames(state, "thorax", times)
+    a = state.character.body("thorax").semi_axes[0]
+    return c + a * R[:, :, 0]
+
+
+def _ray_to_surface(R: np.ndarray, c: np.ndarray, semi, direction: np.ndarray) -> np.ndarray:
+    """Where the ray from an ellipsoid's centre along ``direction`` (world) leaves it."""
+    d = R.T @ direction
+    return c + direction / max(float(np.linalg.norm(d / np.asarray(semi))), 1e-9)
+
+
+def torso_distance(state: CharacterState, point, t: float) -> float:
+    """Signed distance (m, < 0 inside) of a world point from the torso (thorax ∪ abdomen
+    ellipsoids) at time t, measured along the ray from each ellipsoid's centre (exact on the
+    surface, an upper bound of the Euclidean distance off it)."""
+    point = np.asarray(point, float)
+    best = np.inf
+    for body in TORSO_BODIES:
+        R, c = body_frames(state, body, [t])
+        x = R[0].T @ (point - c[0])
+        n = float(np.linalg.norm(x))
+        k = float(np.linalg.norm(x / np.asarray(state.character.body(body).semi_axes)))
+        best = min(best, n * (1.0 - 1.0 / k) if k > 1e-12 else -float(min(state.character.body(body).semi_axes)))
+    return best
+
+
+def _horizontal_unit(v, fallback=(1.0, 0.0)) -> np.ndarray:
+    v = np.asarray(v, float)[:2]
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else np.asarray(fallback, float)
+
+
+def tackle_measure(attacker: CharacterState, target: CharacterState, t: float, h: float = 0.01) -> dict:
+    """What a tackle achieved at time t: the attacker's contact point (front of the chest)
+    against the target's torso surface, and the closing speed — the contact point's velocity
+    relative to the target's thorax centre along the horizontal line between them (backward
+    difference over ``h``; the impact is usually the last instant of the scenario)."""
+    ta = [t - h, t]
+    front = chest_front(attacker, ta)
+    _, c_t = body_frames(target, "thorax", ta)
+    _, c_a = body_frames(attacker, "thorax", ta)
+    u = _horizontal_unit(c_t[1] - c_a[1])
+    rel_v = ((front[1] - front[0]) - (c_t[1] - c_t[0])) / h
+    palms = handle_track(attacker, "palm_l", [t])[0], handle_track(attacker, "palm_r", [t])[0]
+    return {"contact_distance": float(torso_distance(target, front[1], t)),
+            "closing_speed": float(np.dot(rel_v[:2], u)),
+            "contact_point": front[1].tolist(),
+            "chest_to_chest": float(np.linalg.norm(c_t[1] - c_a[1])),
+            "palm_distances": [float(torso_distance(target, p, t)) for p in palms]}
+
+
+def avoid_measure(me: CharacterState, other: CharacterState, t: float) -> float:
+    """Clearance of an avoid goal: the smaller distance of my pelvis and chest from the
+    other's chest at time t (the sphere's centre)."""
+    o = handle_track(other, "chest", [t])[0]
+    return min(float(np.linalg.norm(handle_track(me, hd, [t])[0] - o)) for hd in ("pelvis", "chest"))
+
+
+def reach_budget(g: GoalSpec, me: CharacterState, window: tuple[float, float] | None) -> float:
+    """How far (m) a soft tackle/avoid target may ask a handle to move in one solve: ½ REACH_ACCEL τ²,
+    τ = the goal time minus the start of the optimised window (the reaction time left).  Later
+    cycles of the decreasing horizon have less time to react; asking for more than a body can
+    do in that time would only buy large, implausible forces (and stall the solver)."""
+    t0 = me.motion.start if window is None else window[0]
+    tau = max(float(g.time) - float(t0), 0.0)
+    return 0.5 * REACH_ACCEL * tau * tau
+
+
+def _clamp(current: np.ndarray, wanted: np.ndarray, budget: float) -> np.ndarray:
+    d = wanted - current
+    n = float(np.linalg.norm(d))
+    return wanted if n <= budget else current + d * (budget / n)
+
+
+def _tackle_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float = np.inf) -> list[HandleTarget]:
+    """Soft springs of a tackle for the attacker, from the target's current motion: the chest
+    centre where its front touches the target's torso (on the side facing the attacker's
+    approach), the chest TACKLE_SPEED_LEAD s earlier where the goal's closing speed puts it,
+    and with ``hands_around_torso`` the palms beside and behind the target's chest.  When
+    the chest would have to move more than ``budget`` (:func:`reach_budget`), every target is
+    shifted back so that it moves by the budget."""
+    min_speed, hands, speed = g.data
+    goal_speed = float(speed) if speed is not None else 1.1 * float(min_speed)
+    other = scene.character(g.partner)
+    t, lead = g.time, TACKLE_SPEED_LEAD
+    R, c = body_frames(other, "thorax", [t - lead, t])
+    my_then, my = handle_track(me, "chest", [max(t - 0.25, me.motion.start), t])
+    u = _horizontal_unit(c[1] - my_then)  # the approach direction (not the last instant's)
+    u3, lat3 = np.r_[u, 0.0], np.r_[-u[1], u[0], 0.0]
+    semi = other.character.body("thorax").semi_axes
+    surf = _ray_to_surface(R[1], c[1], semi, -u3)
+    chest = surf - u3 * me.character.body("thorax").semi_axes[0]
+    v_other = (c[1] - c[0]) / lead
+    before = chest - lead * (goal_speed + float(np.dot(v_other, u3))) * u3
+    shift = _clamp(my, chest, budget) - chest
+    chest, before, c = chest + shift, before + shift, c + shift
+    out = [HandleTarget("chest", t, tuple(float(v) for v in chest), TARGET_WEIGHT, name=f"goal:{g.name}"),
+           HandleTarget("chest", t - lead, tuple(float(v) for v in before), TARGET_WEIGHT / 3,
+                        name=f"goal:{g.name}")]
+    if hands:  # palms on the target's flanks, a little behind her chest centre
+        for side, sgn in (("l", 1.0), ("r", -1.0)):
+            flank = _ray_to_surface(R[1], c[1], semi, sgn * lat3)
+            p = flank + sgn * lat3 * 0.03 + u3 * 0.06
+            out.append(HandleTarget(f"palm_{side}", t, tuple(float(v) for v in p), TARGET_WEIGHT / 3,
+                                    name=f"goal:{g.name}"))
+    return out
+
+
+def _avoid_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float = np.inf) -> list[HandleTarget]:
+    """Soft escape springs of an avoid goal, from the other's current motion.
+
+    The pelvis and chest that are inside the sphere (+ AVOID_MARGIN) at the goal time are
+    pulled out of it sideways to the other's approach — horizontally, perpendicular to its
+    chest velocity, on the side the pelvis already is (or the side it moves toward) — by at
+    most ``budget``; the same displacement is asked AVOID_LEAD s earlier, so that the body
+    is out of the way instead of flinging the chest out at the last instant.  Soft, so that a
+    dodge that cannot be done with physical forces is traded off against the dynamics
+    instead of being forced by non-physical root forces (a hard sphere constraint did exactly
+    that: root residuals of 0.6 body weight in the short late windows)."""
+    other = scene.character(g.partner)
+    t = g.time
+    c0, centre = handle_track(other, "chest", [max(t - 0.1, other.motion.start), t])
+    v = _horizontal_unit(centre - c0)
+    perp = np.array([-v[1], v[0]])
+    pel0, pel = handle_track(me, "pelvis", [max(t - 0.1, me.motion.start), t])
+    off = float(np.dot(pel[:2] - centre[:2], perp))
+    side = np.sign(off) if abs(off) > 0.02 else (np.sign(float(np.dot(pel[:2] - pel0[:2], perp))) or 1.0)
+    u = np.r_[perp * side, 0.0]
+    need = g.data[0] + AVOID_MARGIN
+    out = []
+    for hd in ("pelvis", "chest"):
+        p_then, p = handle_track(me, hd, [t - AVOID_LEAD, t])
+        w = p - centre
+        if float(np.linalg.norm(w)) >= need:
+            continue
+        # the smallest s >= 0 with |p + s u - centre| = need
+        b = float(np.dot(w, u))
+        s_ = -b + math.sqrt(max(b * b - (float(np.dot(w, w)) - need * need), 0.0))
+        d = _clamp(p, p + s_ * u, budget) - p
+        for tt, pp in ((t, p), (t - AVOID_LEAD, p_then)):
+            out.append(HandleTarget(hd, float(tt), tuple(float(x) for x in pp + d), AVOID_WEIGHT,
+                                    name=f"goal:{g.name}"))
+    return out
+
+
+def goal_targets(scene: Scene, character: str, goal_names, window: tuple[float, float] | None = None
+                 ) -> tuple[tuple[HandleTarget, ...], tuple[Avoid, ...]]:
+    """Solver terms for the named goals that bind ``character``, from the current Scene.
+
+    ``window``: the optimised world-time window (None: the whole motion); tackle and avoid
+    targets ask for no more than the reaction time from its start allows (:func:`reach_budget`)."""
     targets, avoid = [], []
     me = scene.character(character)
     for gname in goal_names:
@@ -429,26 +650,9 @@ def goal_targets(scene: Scene, character: str, goal_names) -> tuple[tuple[Handle
             handle, point = g.data
             targets.append(HandleTarget(handle, g.time, tuple(point), TARGET_WEIGHT, name=f"goal:{g.name}"))
         elif g.type == "tackle" and g.character == character:
-            other = scene.character(g.partner)
-            chest = handle_track(other, "chest", [g.time])[0]
-            my_chest = handle_track(me, "chest", [g.time])[0]
-            d = chest[:2] - my_chest[:2]
-            u = d / max(np.linalg.norm(d), 1e-6)
-            lat = np.array([-u[1], u[0]])
-            r = 0.14  # m: half the torso depth
-            contact = chest - np.r_[u * r, 0.0]
-            targets.append(HandleTarget("chest", g.time, tuple(contact - np.r_[u * 0.12, 0.0]), TARGET_WEIGHT,
-                                        name=f"goal:{g.name}"))
-            if g.data[1]:  # hands around the torso: palms beside / behind it
-                for side, s in (("l", 1.0), ("r", -1.0)):
-                    p = chest + np.r_[s * lat * 0.17 + u * 0.05, 0.0]
-                    targets.append(HandleTarget(f"palm_{side}", g.time, tuple(p), TARGET_WEIGHT / 3,
-                                                name=f"goal:{g.name}"))
+            targets += _tackle_targets(scene, g, me, reach_budget(g, me, window))
         elif g.type == "avoid" and g.character == character:
-            other = scene.character(g.partner)
-            center = tuple(handle_track(other, "chest", [g.time])[0])
-            for h in ("pelvis", "chest"):
-                avoid.append(Avoid(h, g.time, center, g.data[0]))
+            targets += _avoid_targets(scene, g, me, reach_budget(g, me, window))
     return tuple(targets), tuple(avoid)
 
 

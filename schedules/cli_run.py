@@ -18,7 +18,7 @@ import numpy as np
 from scenarios.errors import InputError, Location
 from scenarios.loader import find_scenario, load_scenario
 
-__all__ = ["register", "run_scenario", "goal_report"]
+__all__ = ["register", "run_scenario", "goal_report", "goal_verdict", "tackle_entry", "avoid_entry"]
 
 
 def _versions() -> dict:
@@ -55,7 +55,9 @@ AUDIT_TOLERANCES = {"footstep_tol": 5e-3, "penetration_tol": 1e-2, "friction_tol
 
 def goal_report(scene, contact_audits: dict | None = None) -> tuple[dict, dict]:
     """({goal: {holds, measured, tolerance, unit, what}}, {coupling: {...}}) from the final Scene."""
-    from scenegraph.scene import handle_track
+    from scenegraph.scene import avoid_measure, handle_track, tackle_measure
+
+    from .measures import transition_entry
 
     goals = {}
     for g in scene.goals:
@@ -79,24 +81,11 @@ def goal_report(scene, contact_audits: dict | None = None) -> tuple[dict, dict]:
             goals[g.name] = {"type": g.type, "what": f"{handle} distance from the target at the time",
                              "measured": d, "tolerance": g.tolerance, "unit": "m", "holds": d <= g.tolerance}
         elif g.type == "tackle":
-            other = scene.character(g.partner)
-            dt = 0.02
-            c0 = handle_track(me, "chest", [g.time - dt, g.time, g.time + dt])
-            o = handle_track(other, "chest", [g.time])[0]
-            d = float(np.linalg.norm(c0[1] - o))
-            u = (o - c0[1]) / max(np.linalg.norm(o - c0[1]), 1e-9)
-            speed = float(np.dot((c0[2] - c0[0]) / (2 * dt), u))
-            min_speed = g.data[0]
-            goals[g.name] = {"type": g.type, "what": "chest-to-chest distance at impact; chest speed toward target",
-                             "measured": d, "tolerance": 0.45, "unit": "m", "speed": speed, "min_speed": min_speed,
-                             "holds": bool(d <= 0.45 and speed >= min_speed)}
+            goals[g.name] = tackle_entry(g, tackle_measure(me, scene.character(g.partner), g.time))
         elif g.type == "avoid":
-            other = scene.character(g.partner)
-            o = handle_track(other, "chest", [g.time])[0]
-            d = min(float(np.linalg.norm(handle_track(me, h, [g.time])[0] - o)) for h in ("pelvis", "chest"))
-            goals[g.name] = {"type": g.type, "what": "closest pelvis/chest distance to the other's chest",
-                             "measured": d, "tolerance": g.data[0], "unit": "m (must be >=)",
-                             "holds": d >= g.data[0] - 1e-3}
+            goals[g.name] = avoid_entry(g, avoid_measure(me, scene.character(g.partner), g.time))
+        elif g.type == "style_change" and g.data[1] is not None:
+            goals[g.name] = transition_entry(g, me, scene.duration)
         elif g.type == "style_change":
             goals[g.name] = {"type": g.type, "what": "style timeline applied (θ blended across the seam)",
                              "measured": None, "tolerance": None, "holds": True}
@@ -110,6 +99,80 @@ def goal_report(scene, contact_audits: dict | None = None) -> tuple[dict, dict]:
                              if len(tracks) == 2 else "max distance of a holder's handle from their centre",
                              "measured": d, "tolerance": c.tolerance, "unit": "m", "holds": d <= c.tolerance}
     return goals, couplings
+
+
+def _adversarial(g, entry: dict) -> dict:
+    """The outcome fields every tackle/avoid entry carries: who plans last, whether this goal
+    is expected to hold (its side plans last and wins by design), and a plain note."""
+    expected = bool(g.expected_to_hold)
+    entry.update({"plans_last": g.plans_last, "expected_to_hold": expected,
+                  "note": (f"{g.character} plans last: expected to hold" if expected else
+                           f"expected to FAIL by design: {g.plans_last} plans last and wins")})
+    return entry
+
+
+def tackle_entry(g, m: dict) -> dict:
+    """Report entry of a tackle goal from :func:`scenegraph.scene.tackle_measure` numbers.
+
+    Holds when the attacker's contact point (front of its chest) is within the goal's
+    tolerance (5 cm) of the target's torso surface (either side: touching, not buried) and
+    the closing speed is within ±10 % of the goal's ``speed`` (or, without one, at least
+    ``min_speed``).  The palms' distances from the torso are reported for the hands-around
+    part (``hands_around_torso``), which does not decide ``holds``."""
+    from scenegraph.scene import TACKLE_SPEED_TOL
+
+    min_speed, hands, goal_speed = g.data
+    d, v = m["contact_distance"], m["closing_speed"]
+    contact_ok = abs(d) <= g.tolerance
+    if goal_speed is not None:
+        speed_ok = abs(v - goal_speed) <= TACKLE_SPEED_TOL * goal_speed
+        speed_what = f"within ±{TACKLE_SPEED_TOL:.0%} of {goal_speed:g} m/s"
+    else:
+        speed_ok = v >= min_speed
+        speed_what = f">= min_speed {min_speed:g} m/s"
+    palms = m["palm_distances"]
+    return _adversarial(g, {
+        "type": g.type,
+        "what": "distance of the attacker's contact point (front of its chest) from the target's torso "
+                f"surface at the impact (|d| <= tolerance), and closing speed {speed_what}",
+        "measured": abs(d), "tolerance": g.tolerance, "unit": "m",
+        "contact_distance": d, "contact_holds": bool(contact_ok),
+        "speed": v, "closing_speed": v, "goal_speed": goal_speed, "min_speed": min_speed,
+        "speed_tolerance": TACKLE_SPEED_TOL * goal_speed if goal_speed is not None else None,
+        "speed_holds": bool(speed_ok),
+        "chest_to_chest": m["chest_to_chest"], "contact_point": m["contact_point"],
+        "hands_around_torso": bool(hands), "palm_torso_distances": palms,
+        "holds": bool(contact_ok and speed_ok)})
+
+
+def avoid_entry(g, clearance: float) -> dict:
+    """Report entry of an avoid goal: clearance (closest of pelvis and chest to the other's
+    chest) must be at least the sphere radius."""
+    r = g.data[0]
+    return _adversarial(g, {"type": g.type, "what": "closest pelvis/chest distance to the other's chest",
+                            "measured": clearance, "clearance": clearance, "tolerance": r, "radius": r,
+                            "unit": "m (must be >=)", "holds": bool(clearance >= r - 1e-3)})
+
+
+def goal_verdict(goals: dict, couplings: dict) -> dict:
+    """Run-level verdict over the goal entries.
+
+    ``all_goals_hold`` (kept for other tools) is literal: every goal and coupling holds — in
+    an adversarial scene the loser's goal fails by design, so it is False there.
+    ``winners_goals_hold``: every tackle/avoid goal expected to hold (its side plans last) holds
+    (True without adversarial goals); ``goals_as_expected``: every goal and coupling holds
+    except those expected to fail; ``expected_failures``: the goals expected to fail, with
+    whether they did."""
+    adv = {n: e for n, e in goals.items() if "expected_to_hold" in e}
+    winners = all(e["holds"] for e in adv.values() if e["expected_to_hold"])
+    expected_fail = {n: {"holds": e["holds"], "plans_last": e["plans_last"]}
+                     for n, e in adv.items() if not e["expected_to_hold"]}
+    as_expected = (all(e["holds"] for n, e in goals.items() if n not in expected_fail)
+                   and all(c["holds"] for c in couplings.values()))
+    return {"all_goals_hold": bool(all(e["holds"] for e in goals.values()) and
+                                   all(c["holds"] for c in couplings.values())),
+            "winners_goals_hold": bool(winners), "goals_as_expected": bool(as_expected),
+            "expected_failures": expected_fail}
 
 
 # --- the command -------------------------------------------------------------------------------
@@ -192,11 +255,12 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
                                 "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}
                        for c in final.characters},
         "goals": goals, "couplings": couplings,
-        "all_goals_hold": all(g["holds"] for g in goals.values()) and all(c["holds"] for c in couplings.values()),
+        **goal_verdict(goals, couplings),
         "all_audits_pass": all(a["passes"] for a in audits.values()),
         "total_seconds": round(time.perf_counter() - t0, 3), "solve_seconds": round(result.seconds, 3),
         "versions": _versions(),
     }
+    rep["passes"] = bool(rep["all_audits_pass"] and rep["winners_goals_hold"])
     _atomic_text(json.dumps(rep, indent=1, default=_json_default) + "\n", report_path)
     try:
         import matplotlib  # noqa: F401
@@ -220,6 +284,12 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
     print(f"compose: wrote {out_path} and {report_path} in {rep['total_seconds']:.1f} s"
           + ("" if rep["all_goals_hold"] else "; some goals/couplings do not hold (see the report)"),
           file=log, flush=True)
+    for n, e in goals.items():
+        if "expected_to_hold" in e:
+            print(f"compose: {e['type']} goal {n!r} ({e['plans_last']} plans last): "
+                  f"{'holds' if e['holds'] else 'does NOT hold'}"
+                  + (" (expected to hold)" if e["expected_to_hold"] else
+                     " (expected to fail by design: the other side plans last)"), file=log, flush=True)
     for who, a in audits.items():
         if not a["passes"]:
             print(f"compose: physics audit FAILED for {who!r}: root residual {a['root_residual_rel']:.3g} body "
@@ -242,7 +312,9 @@ def _json_default(o):
 def _run(args) -> int:
     rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
                        run_dir=args.run_dir, fps=args.fps, accept_capped=args.accept_capped)
-    return 0 if rep["all_audits_pass"] else 1
+    # exit 0: every physics audit passes and, in adversarial scenes, the goals of the side that
+    # plans last hold (the other side's goals are expected to fail and do not decide it)
+    return 0 if rep["all_audits_pass"] and rep["winners_goals_hold"] else 1
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -41,6 +41,8 @@ KINDS = [
     ("walk_to_run", {TIME_LAYERED, TIMEWARP}, 1),
     ("handhold", {COUPLED, TIMEWARP}, 1),
     ("tackle", {DECREASING_HORIZON, TIMEWARP}, 1),
+    ("tackle_dodge", {DECREASING_HORIZON, TIMEWARP}, 1),
+    ("two_tacklers", {DECREASING_HORIZON, TIMEWARP}, 1),
     # edits of one style (paper §7): the walk's shape, one subproblem each
     ("suitcase", {TIMEWARP}, 1),
     ("limp", {TIMEWARP}, 1),
@@ -223,9 +225,9 @@ def test_decreasing_horizon_shrinks_and_planner_last_is_last():
     for st in fulls:
         assert st.role == "horizon"
         if st.characters == ("tackler",):
-            assert "tackle_1" in st.goals
+            assert "hit" in st.goals
         else:
-            assert "avoid_2" in st.goals and st.term("impact:tackle_1") == "hard"
+            assert "dodge" in st.goals and st.term("impact:hit") == "hard"
         assert (st.term("start") == "hard") == (st.window[0] == 0.0)
         assert (st.term("boundary:start") == "hard") == (st.window[0] > 0.0)
 
@@ -236,6 +238,28 @@ def test_plans_last_decides_the_order():
     assert s.order()[-1].characters == ("dodger",)
     fulls = [st for st in s.order() if st.kind == "full"]
     assert [st.characters[0] for st in fulls] == ["tackler", "dodger"] * 3
+    # the bundled variant that differs only in who plans last compiles to the same order
+    d = _compile("tackle_dodge")
+    assert [st.id for st in d.order()] == [st.id for st in s.order()]
+    assert [st.window for st in d.order()] == [st.window for st in s.order()]
+
+
+def test_two_tacklers_one_horizon_branch_target_last():
+    s = _compile("two_tacklers")
+    assert len(s.groups) == 1
+    fulls = [st for st in s.order() if st.kind == "full"]
+    per_cycle = {}
+    for st in fulls:
+        per_cycle.setdefault(st.cycle, []).append(st)
+    assert sorted(per_cycle) == [1, 2, 3]
+    for cycle, sts in per_cycle.items():
+        assert {st.characters[0] for st in sts} == {"dodger", "left_tackler", "right_tackler"}
+        assert len({st.window for st in sts}) == 1
+        assert sts[-1].characters == ("dodger",)  # plans last in every cycle
+        # the two tacklers do not depend on each other within a cycle
+        a, b = [st for st in sts if st.characters[0] != "dodger"]
+        assert not s.has_path(a.id, b.id) and not s.has_path(b.id, a.id)
+    assert [per_cycle[c][0].window[0] for c in (1, 2, 3)] == pytest.approx([0.0, 0.5, 0.75])
 
 
 def test_long_duration_is_time_layered_within_max_window():

@@ -145,8 +145,8 @@ ERRORS = [
     (BASE + "couplings:\n  - type: hand_hold\n    between:\n      - {character: alice, handle: palm_r}\n"
             "      - {character: bob, handle: palm_l}\n    interval: [1.0, 1.0]\n",
      "11:15 couplings[0].interval", "must be after its start"),
-    (BASE + "goals:\n  - type: tackle\n    attacker: alice\n    target: bob\n    time: 1\n    speed: 3\n",
-     "11:12 goals[0].speed", "unknown field 'speed'"),
+    (BASE + "goals:\n  - type: tackle\n    attacker: alice\n    target: bob\n    time: 1\n    velocity: 3\n",
+     "11:15 goals[0].velocity", "unknown field 'velocity'"),
     (BASE + "goals:\n  - type: tackel\n", "7:11 goals[0].type", "unknown type 'tackel'"),
     ("name: t\nduration: 1\n", "1:1 characters", "missing required field 'characters'"),
     (BASE + "characters: []\n", "6:1 characters", "duplicate key 'characters'"),
