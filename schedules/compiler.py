@@ -14,14 +14,15 @@ How the schedule is chosen (``schedule.kind: auto``, the default):
    * otherwise a coupling in it → **coupled characters**: characters alternate (sorted
      names; ``solves_per_cycle`` repeats some), each coupling a rubber band whose stiffness
      rises every cycle (``stiffness_start``, ``+stiffness_increase``, ``×stiffness_factor``);
+     timing steps in the first cycle only;
    * otherwise one character alone.
    Single and coupled branches are **time-layered** when the duration exceeds
    ``max_window`` or a style changes over time: windows abut at every style change and
    are split to at most ``max_window``; each cycle solves the windows, then a seam window C
    straddling every boundary; θ is interpolated linearly across the seam (or across the
    style change's ``blend``).  When the duration fits one window (the layers come from a
-   style change), the timing step is solved once over the whole duration before the
-   windows, which then get full steps only.
+   style change), the branch is first solved whole (timing and full), then its windows and
+   seams get full steps only, one cycle unless ``cycles`` says otherwise.
 3. Every subproblem uses the **timewarp** schedule: a ``timing`` Step (timewarp and free
    placements, dynamics relaxed) then a ``full`` Step (dynamics hard).
 
@@ -162,6 +163,8 @@ def _structure(scn: Scenario) -> _Structure:
             pair_last.setdefault(frozenset((goal.character, goal.around)), []).append((goal.plans_last, goal.around))
         elif isinstance(goal, StyleChangeGoal):
             style_changes[goal.character].append(goal)
+            if goal.gait is not None:  # its pace is a goal term too
+                goals_of[goal.character].append((gname, goal))
         else:
             goals_of[goal.character].append((gname, goal))
     couplings_of: dict[str, list] = {n: [] for n in names}
@@ -228,6 +231,8 @@ def _goal_active(goal, window: tuple[float, float]) -> bool:
         return window[0] <= goal.time + EPS
     if isinstance(goal, (ReachGoal, TackleGoal, AvoidGoal)):
         return _touches(goal.time, window)
+    if isinstance(goal, StyleChangeGoal):  # a gait change sets the pace (pelvis targets) throughout
+        return goal.gait is not None
     return False
 
 
@@ -320,8 +325,11 @@ def _observed(st: _Structure, ch: str, members: list[str], window: tuple[float, 
 
 
 def _solve_order(st: _Structure, members: list[str], adversarial: bool) -> list[str]:
+    """Adversaries: those who plan last go last.  Coupled characters: those solved more often
+    per cycle (``solves_per_cycle``) go first, so they also make the first move toward the
+    partner and do most of the adapting (thesis §6.4.3); then by name."""
     if not adversarial:
-        return sorted(members)
+        return sorted(members, key=lambda n: (-st.spec.solves_per_cycle.get(n, 1), n))
     return sorted(members, key=lambda n: (n in st.plans_last, n))
 
 
@@ -384,23 +392,32 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
     sched = tuple(kinds)
     blocks: list[_Block] = []
     window_kinds = None
-    if layered and spec.timewarp and len(windows) > 1 and T <= spec.max_window + EPS:
-        # The timewarp is global (a windowed step holds the warp its neighbours see), so a
-        # time-layered branch solves its timing once over the whole duration, with relaxed
-        # dynamics; that also makes the windows' held boundaries consistent before their
-        # full solves (starting the windows from the kinematic initial motion left them
-        # pinned to boundary states with root residuals of ~2 mg).  Only when the whole
-        # fits one window: longer branches keep a timing step per window.
-        reasons.append("timing solved once over the whole duration, then full steps per window")
+    if layered and len(windows) > 1 and T <= spec.max_window + EPS:
+        # The whole branch fits one window (the layers come from a style change): solve it
+        # whole first — timing (the timewarp is global: a windowed step holds the warp its
+        # neighbours see) and full dynamics — so that the windows start from, and hold
+        # boundary states of, a physically valid motion; then each window with its own
+        # style and the seams with θ blended across them.  Windows started from the
+        # kinematic initial motion, or from the relaxed timing solve, were pinned to
+        # boundary states with root residuals of ~2 mg and ended at energies of 10⁴–10⁵.
+        reasons.append("solved whole first (timing and full), then full steps per window and seam")
         window_kinds = (FULL,)
+        if spec.cycles is None:
+            cycles = 1
         whole = [tuple(sorted(members))] if mode == "joint_layered" else [(m,) for m in order]
         for chars in whole:
             blocks.append(_Block(chars, (0.0, T), 1, "whole", "whole", sched, couplings="hard"
                                  if mode == "joint_layered" else "spring",
                                  observes=_observed(st, chars[0], members, (0.0, T)) if alternating else (),
-                                 stiffness=spec.stiffness(1) if alternating else None, kinds=(TIMING,)))
+                                 stiffness=spec.stiffness(1) if alternating else None))
     for cycle in range(1, cycles + 1):
         stiffness = spec.stiffness(cycle) if alternating else None
+        cycle_kinds = window_kinds
+        if mode == "coupled" and spec.timewarp and cycle > 1:
+            # the timing is settled in the first cycle; later cycles refine with full dynamics
+            # as the band stiffens (their timing steps stopped at the iteration cap and were
+            # discarded in 5 of 6 handhold solves while costing as much as the full steps)
+            cycle_kinds = (FULL,)
         if mode == "adversarial":
             t0 = t_event * (1.0 - 2.0 ** (1 - cycle))
             slots = [((t0, T), "horizon", "horizon", None)]
@@ -415,7 +432,7 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
                         if reps[m] >= r:
                             blocks.append(_Block((m,), window, cycle, role, label, sched,
                                                  observes=_observed(st, m, members, window),
-                                                 stiffness=stiffness, seam=seam_t, repeat=r, kinds=window_kinds))
+                                                 stiffness=stiffness, seam=seam_t, repeat=r, kinds=cycle_kinds))
             elif mode in ("joint", "joint_layered"):
                 blocks.append(_Block(tuple(sorted(members)), window, cycle, role, label, sched,
                                      couplings="hard", seam=seam_t, kinds=window_kinds))

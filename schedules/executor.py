@@ -154,6 +154,10 @@ def _hard_violations(viol: dict) -> dict:
     return {k: v for k, v in viol.items() if v > VIOLATION_TOL}
 
 
+def _gait_change(scene: Scene, who: str) -> bool:
+    return any(g.type == "style_change" and g.character == who and g.data[1] is not None for g in scene.goals)
+
+
 def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndarray | None]:
     st = scene.character(who)
     m = st.motion
@@ -162,7 +166,10 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
     free = set()
     if "q" in step.free:
         free.add("q")
-    if "timewarp" in step.free and whole:  # windowed steps keep the warp (their neighbours hold it)
+    if "timewarp" in step.free and whole and not _gait_change(scene, who):
+        # windowed steps keep the warp (their neighbours hold it); so does a gait change,
+        # whose plan times the walk and the run (a free warp compressed the walk and
+        # stretched the run into one uniform energy-optimal speed)
         free.add("warp")
     steps = st.footsteps
     if "footprints" in step.free:

@@ -73,7 +73,7 @@ def transition_measures(state: CharacterState, t_change: float, blend: float, ga
 
 def transition_entry(goal, state: CharacterState, duration: float) -> dict:
     """Report entry of a style change with a gait (``goal.data`` = (style, gait, blend))."""
-    _, gait, blend = goal.data
+    _, gait, blend = goal.data[:3]
     m = transition_measures(state, goal.time, float(blend or 0.6), gait, duration)
     return {"type": goal.type, "what": f"mean pelvis speed over the last {gait} stride vs the {gait}'s speed "
             "(cadence × step length); lean and dip of the transition",

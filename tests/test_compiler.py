@@ -40,6 +40,7 @@ KINDS = [
     ("two_walkers", {TIMEWARP}, 2),
     ("walk_to_run", {TIME_LAYERED, TIMEWARP}, 1),
     ("handhold", {COUPLED, TIMEWARP}, 1),
+    ("handhold_child_adapts", {COUPLED, TIMEWARP}, 1),
     ("tackle", {DECREASING_HORIZON, TIMEWARP}, 1),
     ("tackle_dodge", {DECREASING_HORIZON, TIMEWARP}, 1),
     ("two_tacklers", {DECREASING_HORIZON, TIMEWARP}, 1),
@@ -81,12 +82,18 @@ def test_general_properties(name):
     for block, steps in _blocks(s).items():
         if steps[0].group in layered:
             kinds = [st.kind for st in steps]
-            assert kinds == (["timing"] if steps[0].role == "whole" else ["full"]), block
+            assert kinds == (["timing", "full"] if steps[0].role == "whole" else ["full"]), block
             if steps[0].role == "whole":
-                (timing,) = steps
-                assert timing.window == (0.0, load_scenario(name).duration) and "timewarp" in timing.free
-                later = [st for st in order if set(st.characters) & set(timing.characters) and st is not timing]
-                assert all(s.has_path(timing.id, st.id) for st in later)
+                timing, full = steps
+                assert timing.window == full.window == (0.0, load_scenario(name).duration)
+                assert "timewarp" in timing.free
+                later = [st for st in order if set(st.characters) & set(timing.characters) and st not in steps]
+                assert all(s.has_path(full.id, st.id) for st in later)
+            continue
+        coupled_later = COUPLED in next(gr.kinds for gr in s.groups if gr.name == steps[0].group) \
+            and steps[0].cycle > 1
+        if coupled_later:  # coupled schedules settle the timing in their first cycle
+            assert [st.kind for st in steps] == ["full"], block
             continue
         assert [st.kind for st in steps] == ["timing", "full"], block
         timing, full = steps
@@ -139,9 +146,10 @@ def test_independent_characters_have_no_path_between_their_steps():
 def test_time_layered_seam_runs_after_both_windows():
     s = _compile("walk_to_run")
     steps = s.order()
-    whole = s.step("runner/c1/whole/timing")
-    assert steps[0] is whole and whole.window == (0.0, 2.0) and "timewarp" in whole.free
-    for cycle in (1, 2):
+    whole = s.step("runner/c1/whole/full")
+    assert steps[0].id == "runner/c1/whole/timing" and steps[1] is whole and whole.window == (0.0, 2.0)
+    assert max(st.cycle for st in steps) == 1  # solved whole first: one layered cycle by default
+    for cycle in (1,):
         w0 = s.step(f"runner/c{cycle}/w0/full")
         w1 = s.step(f"runner/c{cycle}/w1/full")
         seam = s.step(f"runner/c{cycle}/seam0/full")
@@ -156,9 +164,10 @@ def test_time_layered_seam_runs_after_both_windows():
         assert w1.term("boundary:start") == "hard" and w1.term("boundary:end") is None
         assert seam.term("boundary:start") == seam.term("boundary:end") == "hard"
         assert all(st.kind == "full" for st in (w0, w1, seam))
-    # the next cycle's windows run after the previous seam
-    assert s.has_path("runner/c1/seam0/full", "runner/c2/w0/full")
-    assert s.has_path("runner/c1/seam0/full", "runner/c2/w1/full")
+    # with more cycles, the next cycle's windows run after the previous seam
+    s2 = _compile("walk_to_run", "schedule: {cycles: 2}\n")
+    assert s2.has_path("runner/c1/seam0/full", "runner/c2/w0/full")
+    assert s2.has_path("runner/c1/seam0/full", "runner/c2/w1/full")
     # θ interpolated across the seam window
     seam = s.step("runner/c1/seam0/full")
     (timeline,) = seam.styles
@@ -198,6 +207,13 @@ def test_solves_per_cycle_decides_who_adapts_more():
     fulls = [st for st in s.order() if st.kind == "full"]
     assert [st.characters[0] for st in fulls] == ["adult", "child", "adult", "adult"] * 2
     assert {st.repeat for st in fulls if st.characters == ("adult",)} == {1, 2, 3}
+    # the one solved more often also goes first (it makes the first move toward the partner)
+    s = _compile("handhold_child_adapts")
+    fulls = [st for st in s.order() if st.kind == "full"]
+    assert [st.characters[0] for st in fulls] == ["child", "adult", "child"] * 4
+    assert s.order()[0].characters == ("child",)
+    # coupled schedules settle the timing in their first cycle
+    assert {st.cycle for st in s.order() if st.kind == "timing"} == {1}
 
 
 def test_stiffness_schedule_parameters():
@@ -221,7 +237,7 @@ def test_decreasing_horizon_shrinks_and_planner_last_is_last():
     t_hit = 1.0
     before = [t_hit - a for a, _ in windows]  # time left to react before the impact halves
     assert before == pytest.approx([1.0, 0.5, 0.25])
-    assert all(b == 1.0 for _, b in windows)  # the scenario ends at the impact
+    assert all(b == pytest.approx(1.1) for _, b in windows)  # to the end of the scenario (0.1 s past the impact)
     for st in fulls:
         assert st.role == "horizon"
         if st.characters == ("tackler",):
