@@ -217,7 +217,8 @@ class NIO:
     def __init__(self, ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *,
                  solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4,
                  ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3, rounds: int = 1,
-                 cyclic: bool = False, soft_pin_hz: float = 0.0, local: bool = False):
+                 cyclic: bool = False, soft_pin_hz: float = 0.0, local: bool = False,
+                 hessian: str = "gauss_newton"):
         self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
         self.local = local  # counterexamples by one Gauss–Newton step from X_T (local_counterexample)
         self.verbose = False
@@ -226,7 +227,13 @@ class NIO:
         self.feas_tol = feas_tol  # m: a counterexample must satisfy C to this tolerance
         self.sp = Subproblem(ch, default_style(ch.total_mass), target, self.footsteps, free=frozenset({"q"}),
                              collocation_hz=collocation_hz, max_iter=solve_iter, tol=tol, label="nio",
-                             ipopt_options=tuple(ipopt_options), cyclic=cyclic, soft_pin_hz=soft_pin_hz)
+                             ipopt_options=tuple(ipopt_options), cyclic=cyclic, soft_pin_hz=soft_pin_hz,
+                             hessian="gauss_newton" if local else hessian)
+        # ``hessian``: Subproblem.hessian of the IPOPT solves (counterexamples with local=False,
+        # resynthesize).  The local counterexample always takes the Gauss–Newton step: with the
+        # exact Hessian (indefinite at X_T) its KKT step goes to a saddle and found nothing
+        # below E(X_T) on 07_01 (G = 0 at the first iteration, measured).
+        self.hessian = hessian
         t = _time.perf_counter()
         self.built: Built = build(self.sp)
         # rebuild with an iteration callback that keeps the best feasible iterate
@@ -455,7 +462,7 @@ class NIO:
         energy-optimal contact forces under ``style`` and IPOPT's warm-start options, which lets
         the solve continue straight down from X_T (measured: it travels further, ~22° on 07_01
         for the learned and the default style alike)."""
-        sp = replace(self.sp, style=style, max_iter=max_iter, tol=1e-6, nlpsol_options=(),
+        sp = replace(self.sp, style=style, max_iter=max_iter, tol=1e-6, nlpsol_options=(), hessian=self.hessian,
                      label=f"resynth{'-warm' if warm else ''}:{style.name}",
                      ipopt_options=WARM_START if warm else (("acceptable_iter", 0),))
         b = build(sp)
@@ -762,10 +769,10 @@ def _versions() -> dict[str, str]:
 def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *, init: Style | str = "paper",
                 name: str = "learned", clip: str | None = None, frames: str | None = None,
                 body: str | None = None, callback=None, solve_iter: int = 100, cyclic: bool = False,
-                local: bool = True, **run_kw) -> NIOResult:
+                local: bool = True, hessian: str = "gauss_newton", **run_kw) -> NIOResult:
     """Learn a style from ``target``.  ``init``: "paper" (α = 1/M, q̄ = mean pose, springs by
     Eq. 22) or a Style to start from.  The returned style carries its provenance."""
-    nio = NIO(ch, target, footsteps, solve_iter=solve_iter, cyclic=cyclic, local=local)
+    nio = NIO(ch, target, footsteps, solve_iter=solve_iter, cyclic=cyclic, local=local, hessian=hessian)
     th0 = nio.initial_theta() if isinstance(init, str) else init.vector().copy()
     if local:  # cheap iterations (~1 s): a stricter relative-decrease stop
         run_kw.setdefault("rtol", 0.005)

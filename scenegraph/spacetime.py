@@ -149,6 +149,8 @@ class Subproblem:
     nlpsol_options: tuple = ()  # extra CasADi nlpsol options as (name, value) pairs (e.g. iteration_callback)
     stall_iterations: int = 0  # > 0: stop as "Stalled" (a success) when the objective has not improved by
     # STALL_REL for this many iterations while every constraint holds to STALL_VIOL (see StallMonitor)
+    hessian: str = "gauss_newton"  # Hessian of the objective given to IPOPT: "gauss_newton" (2 JᵀJ) or
+    # "exact" (adds 2 Σ r ∇²r: the compiled kernel Hessian chained through the splines; see build)
 
 
 @dataclass
@@ -175,13 +177,8 @@ class Result:
 
 # --- the per-point kernel -------------------------------------------------------------------
 
-@functools.lru_cache(maxsize=8)
-def residual_kernel(ch: Character) -> ca.Function:
-    """(q, q̇, q̈ (35 each), forces at FORCE_HANDLES (3·8, world N), θ (118)) → [Q_m (29); Q_0 (6)]."""
-    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
-    fc = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
-    th = ca.SX.sym("theta", N_THETA)
-
+def _kernel_expr(ch: Character, q, qd, qdd, fc, th):
+    """[Q_m (29); Q_0 (6)] as SX of the kernel's symbols (see residual_kernel)."""
     class _S:  # the style numbers the dynamics need
         ks1, ks2, kd, q_rest = (th[i * N_JOINT:(i + 1) * N_JOINT] for i in range(4))
         k_shoe, h_rest = th[4 * N_JOINT], th[4 * N_JOINT + 1]
@@ -191,7 +188,16 @@ def residual_kernel(ch: Character) -> ca.Function:
         h = ch.handle(name)
         ext.append((ch.body(h.body).frame, h.point, fc[3 * i:3 * i + 3]))
     qm, q0 = muscle_and_residual(ch, q, qd, qdd, _S, ext)
-    return ca.Function("compose_residual", [q, qd, qdd, fc, th], [ca.vertcat(qm, q0)],
+    return ca.vertcat(qm, q0)
+
+
+@functools.lru_cache(maxsize=8)
+def residual_kernel(ch: Character) -> ca.Function:
+    """(q, q̇, q̈ (35 each), forces at FORCE_HANDLES (3·8, world N), θ (118)) → [Q_m (29); Q_0 (6)]."""
+    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
+    fc = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
+    th = ca.SX.sym("theta", N_THETA)
+    return ca.Function("compose_residual", [q, qd, qdd, fc, th], [_kernel_expr(ch, q, qd, qdd, fc, th)],
                        ["q", "qd", "qdd", "f", "theta"], ["Q"])
 
 
@@ -199,6 +205,52 @@ def residual_kernel(ch: Character) -> ca.Function:
 def compiled_kernel(ch: Character) -> ca.Function:
     from .codegen import compiled
     return compiled(residual_kernel(ch), with_jacobian=True)
+
+
+@functools.lru_cache(maxsize=8)
+def kernel_hessian(ch: Character, compile: bool = True) -> ca.Function:
+    """(q, q̇, q̈, forces, θ, w (35)) → ∇²_z (w · Q(z)) (129×129, z = (q, q̇, q̈, forces)).
+
+    The second-order term of the exact Hessian of a weighted sum of squares Σ w_i Q_i, with
+    one exception: the paper's smooth steps g(x) = (tanh(500 x) + 1)/2 that blend the passive
+    springs (ks1/ks2) and switch the shoe spring are held at their values when differentiating
+    twice (their first derivatives stay in the gradient).  Their own curvature is a spike of
+    ~500² at the kink (a heel at its 5 mm rest height, a joint at q̄): with it IPOPT's inertia
+    correction reached 1e10–1e17 and stopped with "Error in step computation" (measured).  Away
+    from the kinks (|x| ≫ 2 mm) this is the exact Hessian.  The kernel is linear in q̈ and in
+    the forces, so only (q, q̇) rows and columns are non-zero (3319 entries; ~140 k SX
+    instructions, compiled at -O1 in ~20 s once)."""
+    from . import dynamics as dyn
+
+    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
+    fc = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
+    th = ca.SX.sym("theta", N_THETA)
+    w = ca.SX.sym("w", N_DOF)
+    held, smooth_step = [], dyn.sigmoid
+
+    def held_step(x):  # a symbol in place of g(x): differentiated as a constant
+        g = ca.SX.sym(f"g{len(held)}", x.shape)
+        held.append((g, smooth_step(x)))
+        return g
+
+    dyn.sigmoid = held_step
+    try:
+        Q = _kernel_expr(ch, q, qd, qdd, fc, th)
+    finally:
+        dyn.sigmoid = smooth_step
+    z = ca.vertcat(q, qd, qdd, fc)
+    H, _ = ca.hessian(ca.dot(w, Q), z)
+    if held:
+        H = ca.substitute(H, ca.vertcat(*[g for g, _ in held]), ca.vertcat(*[v for _, v in held]))
+    f = ca.Function("compose_residual_hess", [q, qd, qdd, fc, th, w], [H],
+                    ["q", "qd", "qdd", "f", "theta", "w"], ["H"])
+    if not compile:
+        return f
+    from .codegen import compiled
+    return compiled(f)
+
+
+HESSIAN_MODES = ("gauss_newton", "exact", "gauss_newton_objective")
 
 
 @functools.lru_cache(maxsize=8)
@@ -243,6 +295,13 @@ class Built:
     contact_basis: tuple = ()  # friction pyramid V (3×4, world) per contact_index entry
     spring_handles: tuple = ()  # handle of each Subproblem.springs entry, in order
     monitor: object = None  # StallMonitor when Subproblem.stall_iterations > 0
+    f_fn: ca.Function | None = None  # x, p -> objective (IPOPT's f)
+    hess_fn: ca.Function | None = None  # x, p, lam_f, lam_g -> upper triangle of the Lagrangian Hessian given to IPOPT
+    # the transcription's pieces, for problems that combine several Built (scenegraph/joint.py):
+    rho_dyn_fn: ca.Function | None = None  # x, p -> dynamics residuals (objective = |rho_dyn|² + |rho_extra|²)
+    rho_extra_fn: ca.Function | None = None  # x, p -> the other least-squares residuals (SX-expandable)
+    ctrl_fn: ca.Function | None = None  # x, p -> control points (K × 35)
+    anchor_slices: tuple = ()  # slice into p of each spring's anchor (3 × N at s_points, column-major)
 
 
 STALL_REL = 1e-6  # relative objective improvement that counts as progress
@@ -487,7 +546,11 @@ def build(sp: Subproblem) -> Built:
     # parameters: fixed data and per-point style
     TH = ca.MX.sym("theta", N_THETA, N)
     SA = ca.MX.sym("sqrt_alpha", N_JOINT, N)
-    p = ca.vertcat(P_fixed, W_fixed, ca.vec(TH), ca.vec(SA))
+    # spring anchors (3, N each, at the collocation points) are parameters too, so a joint problem
+    # can substitute them (scenegraph/joint.py: anchor = own handle + F / k makes the force F)
+    A_sym = [ca.MX.sym(f"anchor_{j}", 3, N) for j in range(len(sp.springs))]
+    p = ca.vertcat(P_fixed, W_fixed, *[ca.vec(a) for a in A_sym], ca.vec(TH), ca.vec(SA))
+    n_fixed = K * N_DOF + nW  # offset of the anchors in p
 
     Q, Q1, Q2 = (ca.mtimes(_sparse(Bd), P).T for Bd in (B0, B1, B2))  # (35, N)
     T1 = ca.mtimes(_sparse(W1), warp).T  # (1, N)
@@ -501,12 +564,14 @@ def build(sp: Subproblem) -> Built:
     hk = handles_kernel(ch, hk_names)
     HP = hk.map(N)(Q)  # (3*len, N)
     spring_force = []  # (3, N) world force of each spring at the collocation points
+    anchor_values = []  # the anchors' numeric values (p)
     for sg in sp.springs:
         i = hk_names.index(sg.handle)
         pts = np.asarray(sg.points, float).reshape(-1, 3)
         anchor = np.stack([np.interp(t_init, sg.times, pts[:, c]) for c in range(3)])
         on = ((t_init >= sg.times[0] - 1e-9) & (t_init <= sg.times[-1] + 1e-9)).astype(float)
-        f = sg.stiffness * (ca.DM(anchor) - HP[3 * i:3 * i + 3, :]) * ca.repmat(ca.DM(on).T, 3, 1)
+        anchor_values.append(anchor.ravel(order="F"))
+        f = sg.stiffness * (A_sym[len(anchor_values) - 1] - HP[3 * i:3 * i + 3, :]) * ca.repmat(ca.DM(on).T, 3, 1)
         place = np.zeros((3 * len(FORCE_HANDLES), 3))
         r0 = 3 * FORCE_HANDLES.index(sg.handle)
         place[r0:r0 + 3, :] = np.eye(3)
@@ -672,7 +737,30 @@ def build(sp: Subproblem) -> Built:
         Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s, gs), xs)[0]])(x, p, lam_g)
     else:
         Hc = ca.MX(x.shape[0], x.shape[0])
-    H = ca.triu(2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x)) + Hc)
+    H = 2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x))
+    if sp.hessian != "gauss_newton_objective":
+        H = H + Hc
+    if sp.hessian not in HESSIAN_MODES:
+        raise ValueError(f"Subproblem.hessian must be one of {HESSIAN_MODES}, not {sp.hessian!r}")
+    if sp.hessian == "exact":
+        # second-order term 2 Σ r ∇²r of Σ r² (times lam_f).  Dynamics: r = C ⊙ Q(z) per point with
+        # z = (q, q̇, q̈, forces); with the timewarp held, C is constant and z linear in x, so the
+        # term is exactly J_zᵀ blockdiag(∇²_z (w·Q)) J_z with w = 2 lam_f r ⊙ C (compiled kernel
+        # Hessian).  A free timewarp (and a spring's force, nonlinear in q) also curves z and C:
+        # those curvature terms are left out (Gauss–Newton in them).
+        if sp.dynamics != "kinematic":
+            C = scale * ca.vertcat(SA, np.sqrt(w_r) * ca.DM.ones(N_ROOT, N)) * ca.repmat(wt, N_DOF, 1)
+            Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, N) * C
+            nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
+            Hk = kernel_hessian(ch).map(N)(Q, Qd, Qdd, Fc, TH, Wk)  # (nz, nz N)
+            Hzz = ca.diagcat(*ca.horzsplit(Hk, nz)) if N > 1 else Hk
+            Jz = ca.jacobian(ca.vec(ca.vertcat(Q, Qd, Qdd, Fc)), x)
+            H = H + ca.mtimes(Jz.T, ca.mtimes(Hzz, Jz))
+        if rho_x.shape[0]:  # the other least-squares terms are plain SX algebra: exact Hessian directly
+            mu = ca.SX.sym("mu", rho_x.shape[0])
+            H = H + ca.Function("H_extra", [xs, ps, mu], [ca.hessian(ca.dot(mu, rxs), xs)[0]])(
+                x, p, 2 * lam_f * rho_x)
+    H = ca.triu(H)
     hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
     jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
@@ -700,7 +788,8 @@ def build(sp: Subproblem) -> Built:
         SA0 = np.outer(sa, 1 - wgt) + np.outer(sa_end, wgt)
     else:
         TH0, SA0 = np.tile(th[:, None], (1, N)), np.tile(sa[:, None], (1, N))
-    pv = np.concatenate([ctrl0.ravel(), np.asarray(m.warp, float), TH0.ravel(order="F"), SA0.ravel(order="F")])
+    pv = np.concatenate([ctrl0.ravel(), np.asarray(m.warp, float), *anchor_values,
+                         TH0.ravel(order="F"), SA0.ravel(order="F")])
 
     springs_out = ca.vertcat(*spring_force) if spring_force else ca.MX(0, N)
     unpack = ca.Function("unpack", [x, p], [P, warp, xF, energy, root_energy, springs_out])
@@ -711,7 +800,11 @@ def build(sp: Subproblem) -> Built:
                                xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4))
                   for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
                  slice(xP.shape[0] + xW.shape[0] + xF.shape[0], x.shape[0]), free_steps,
-                 ca.Function("g", [x, p], [gg]), tuple(Vc), tuple(sg.handle for sg in sp.springs), monitor)
+                 ca.Function("g", [x, p], [gg]), tuple(Vc), tuple(sg.handle for sg in sp.springs), monitor,
+                 ca.Function("f", [x, p], [f]), hess,
+                 ca.Function("rho_dyn", [x, p], [rho_dyn]), ca.Function("rho_extra", [x, p], [rho_x]),
+                 ca.Function("ctrl", [x, p], [P]),
+                 tuple(slice(n_fixed + 3 * N * j, n_fixed + 3 * N * (j + 1)) for j in range(len(sp.springs))))
 
 
 def violations(b: Built, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:

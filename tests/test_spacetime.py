@@ -141,3 +141,77 @@ def test_spring_force_enters_the_dynamics():
                            {h: v for h, v in res.contact_forces.items() if h != "palm_r"})
     assert with_force.root_residual_rel <= 1e-3, with_force
     assert without.root_residual_max > 3 * with_force.root_residual_max + 1.0
+
+
+# --- Hessian modes ----------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def small_window():
+    """The walk's initial motion with only the control points of a 0.35 s window free, soft
+    footprint springs on (nonlinear least squares beyond the dynamics)."""
+    steps = footsteps_for_walk()
+    m0 = initial_motion(CH, steps, steps[1].t0, steps[-1].t0)
+    w0 = steps[1].t0 + 0.3
+    return steps, m0, (w0, w0 + 0.35)
+
+
+def _hessian_check(b, x, n_dirs=3, h=1e-5):
+    """Relative error of the Hessian given to IPOPT (λ_f = 1, λ_g = 0: the objective's) times
+    random directions against central differences of the objective's AD gradient."""
+    import casadi as ca
+
+    Hu = np.asarray(ca.DM(b.hess_fn(x, b.p, 1.0, np.zeros(b.lbg.size))).full())
+    H = Hu + np.triu(Hu, 1).T
+    xs = ca.MX.sym("x", x.size)
+    grad = ca.Function("grad_f", [xs], [ca.gradient(b.f_fn(xs, b.p), xs)])
+    rng = np.random.default_rng(3)
+    errs = []
+    for _ in range(n_dirs):
+        v = rng.normal(size=x.size)
+        v /= np.linalg.norm(v)
+        fd = (np.asarray(grad(x + h * v)).ravel() - np.asarray(grad(x - h * v)).ravel()) / (2 * h)
+        errs.append(np.linalg.norm(H @ v - fd) / np.linalg.norm(fd))
+    return max(errs)
+
+
+def test_exact_hessian_matches_finite_differences(small_window):
+    """hessian="exact" hands IPOPT the true Hessian of the objective (residual curvature of the
+    dynamics kernel and of the soft springs included); the Gauss–Newton one measurably is not.
+    The style has no smooth-step kinks (ks2 = ks1, no shoe spring), whose curvature the exact
+    mode holds out on purpose (kernel_hessian)."""
+    from scenegraph.spacetime import build
+
+    steps, m0, window = small_window
+    smooth = STYLE.with_(ks2=STYLE.ks1, k_shoe=0.0)
+    errs = {}
+    for mode in ("exact", "gauss_newton"):
+        b = build(Subproblem(CH, smooth, m0, steps, window=window, free=frozenset({"q"}), soft_pin_hz=120.0,
+                             hessian=mode))
+        x = b.x0 + 1e-3 * np.random.default_rng(0).normal(size=b.x0.size)  # off the initial guess
+        x[b.lam_slice] = np.abs(x[b.lam_slice])
+        errs[mode] = _hessian_check(b, x)
+    assert errs["exact"] < 1e-6, errs
+    assert errs["gauss_newton"] > 1e-5, errs  # the check can tell the two apart
+
+
+def test_exact_hessian_solves_a_window():
+    """A 0.35 s window of a solved walk (the bench_walk configuration) re-solved with the exact
+    Hessian, warm-started with its contact forces, converges in few iterations (measured: 16–18;
+    Gauss–Newton: 300 without convergence on the same window, see README)."""
+    steps = footsteps_for_walk()
+    r = synthesize(CH, STYLE, steps, steps[1].t0, steps[-1].t0, soft_pin_hz=120.0).result
+    assert r.success, r.summary()
+    window = (steps[1].t0 + 0.3, steps[1].t0 + 0.65)
+    res = solve(Subproblem(CH, STYLE, r.motion, steps, window=window, free=frozenset({"q"}), hessian="exact",
+                           contact_guess=r.contact_forces, max_iter=100))
+    assert res.success, res.summary()
+    assert res.iterations <= 60, res.summary()
+    assert res.violations["footstep"] <= 1e-6 and res.violations["penetration"] <= 1e-6
+
+
+def test_unknown_hessian_mode_is_rejected(small_window):
+    from scenegraph.spacetime import build
+
+    steps, m0, window = small_window
+    with pytest.raises(ValueError, match="hessian"):
+        build(Subproblem(CH, STYLE, m0, steps, window=window, hessian="newton"))

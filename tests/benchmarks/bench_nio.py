@@ -42,6 +42,8 @@ def main() -> None:
     ap.add_argument("--max-iter", type=int, default=200)
     ap.add_argument("--resynth-iter", type=int, default=300)
     ap.add_argument("--out", default=None, help="also write the learned style here")
+    ap.add_argument("--hessian", default="gauss_newton", choices=("gauss_newton", "exact"),
+                    help="spacetime Hessian of the counterexamples and re-syntheses (Subproblem.hessian)")
     args = ap.parse_args()
     frames = parse_frames(args.frames)
 
@@ -55,7 +57,7 @@ def main() -> None:
     t = time.perf_counter()
     res = learn_style(ch, XT, steps, name=Path(args.out).stem if args.out else "walk", clip=Path(args.clip).name,
                       frames=args.frames,
-                      body="adult_male", callback=progress, max_iter=args.max_iter)
+                      body="adult_male", callback=progress, max_iter=args.max_iter, hessian=args.hessian)
     nio_s = time.perf_counter() - t
     print(f"stop: {res.stop_reason}; evaluations {res.evaluations}", flush=True)
 
