@@ -163,8 +163,6 @@ def _structure(scn: Scenario) -> _Structure:
             pair_last.setdefault(frozenset((goal.character, goal.around)), []).append((goal.plans_last, goal.around))
         elif isinstance(goal, StyleChangeGoal):
             style_changes[goal.character].append(goal)
-            if goal.gait is not None:  # its pace is a goal term too
-                goals_of[goal.character].append((gname, goal))
         else:
             goals_of[goal.character].append((gname, goal))
     couplings_of: dict[str, list] = {n: [] for n in names}
@@ -231,8 +229,6 @@ def _goal_active(goal, window: tuple[float, float]) -> bool:
         return window[0] <= goal.time + EPS
     if isinstance(goal, (ReachGoal, TackleGoal, AvoidGoal)):
         return _touches(goal.time, window)
-    if isinstance(goal, StyleChangeGoal):  # a gait change sets the pace (pelvis targets) throughout
-        return goal.gait is not None
     return False
 
 
