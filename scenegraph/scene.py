@@ -44,7 +44,7 @@ TACKLE_CONTACT_TOL = 0.05  # m: the tackler's chest front within this of the tar
 TACKLE_SPEED_TOL = 0.10    # relative: closing speed within ±10 % of the goal speed
 TACKLE_SPEED_LEAD = 0.1    # s: the speed is asked for as a chest position this long before the impact
 AVOID_MARGIN = 0.08        # m: the escape target lies this far outside the avoided sphere
-REACH_ACCEL = 4.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
+REACH_ACCEL = 1.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
 #                            time from the start of the optimised window to the goal (reaction time)
 AVOID_LEAD = 0.05          # s: the escape is asked at the goal time and this long before it
 AVOID_WEIGHT = 300.0       # soft escape springs (same units as TARGET_WEIGHT; 1000 made IPOPT oscillate)
@@ -576,12 +576,13 @@ def _tackle_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float
     surf = _ray_to_surface(R[1], c[1], semi, -u3)
     chest = surf - u3 * me.character.body("thorax").semi_axes[0]
     v_other = (c[1] - c[0]) / lead
-    before = chest - lead * (goal_speed + float(np.dot(v_other, u3))) * u3
     shift = _clamp(my, chest, budget) - chest
-    chest, before, c = chest + shift, before + shift, c + shift
-    out = [HandleTarget("chest", t, tuple(float(v) for v in chest), TARGET_WEIGHT, name=f"goal:{g.name}"),
-           HandleTarget("chest", t - lead, tuple(float(v) for v in before), TARGET_WEIGHT / 3,
-                        name=f"goal:{g.name}")]
+    chest, c = chest + shift, c + shift
+    out = [HandleTarget("chest", t, tuple(float(v) for v in chest), TARGET_WEIGHT, name=f"goal:{g.name}")]
+    for h in (lead, lead / 2):  # the approach at the goal's closing speed (two points: no last-instant lunge)
+        before = chest - h * (goal_speed + float(np.dot(v_other, u3))) * u3
+        out.append(HandleTarget("chest", t - h, tuple(float(v) for v in before), TARGET_WEIGHT / 3,
+                                name=f"goal:{g.name}"))
     if hands:  # palms on the target's flanks, a little behind her chest centre
         for side, sgn in (("l", 1.0), ("r", -1.0)):
             flank = _ray_to_surface(R[1], c[1], semi, sgn * lat3)

@@ -10,7 +10,8 @@ How the schedule is chosen (``schedule.kind: auto``, the default):
      plan last (``plans_last``; default the attacker) after the others; in cycle k the
      optimised interval is [t_e·(1 − 2^(1−k)), T] with t_e the latest adversarial time, so
      the time left before the event halves every cycle; couplings inside the branch are
-     rubber bands whose stiffness rises every cycle;
+     rubber bands whose stiffness rises every cycle; timing steps in the first cycle only
+     (later windows start inside the motion, where the timewarp is held);
    * otherwise a coupling in it → **coupled characters**: characters alternate (sorted
      names; ``solves_per_cycle`` repeats some), each coupling a rubber band whose stiffness
      rises every cycle (``stiffness_start``, ``+stiffness_increase``, ``×stiffness_factor``);
@@ -413,6 +414,13 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
             # the timing is settled in the first cycle; later cycles refine with full dynamics
             # as the band stiffens (their timing steps stopped at the iteration cap and were
             # discarded in 5 of 6 handhold solves while costing as much as the full steps)
+            cycle_kinds = (FULL,)
+        if mode == "adversarial" and spec.timewarp and cycle > 1:
+            # a decreasing-horizon window after the first starts inside the motion: the executor
+            # holds the timewarp there, so a timing step would only relax the dynamics — its
+            # result, kept when it converged, warm-started the full step far from physical
+            # (tackle: dodger E 1.0e3 → 1.4e4 after a converged 0.125 m dodge, then no
+            # convergence in the next cycle); the timing is settled in the first cycle
             cycle_kinds = (FULL,)
         if mode == "adversarial":
             t0 = t_event * (1.0 - 2.0 ** (1 - cycle))

@@ -90,8 +90,8 @@ def test_avoid_measure_is_the_closer_of_pelvis_and_chest(scene):
 def test_targets_respect_the_reaction_time_budget(scene):
     g = scene.goal("hit")
     him = scene.character("tackler")
-    assert reach_budget(g, him, None) == pytest.approx(0.5 * 4.0 * 1.0)
-    assert reach_budget(g, him, (0.75, 1.0)) == pytest.approx(0.5 * 4.0 * 0.25 ** 2)
+    assert reach_budget(g, him, None) == pytest.approx(0.5 * 1.0 * 1.0)
+    assert reach_budget(g, him, (0.75, 1.0)) == pytest.approx(0.5 * 1.0 * 0.25 ** 2)
     # the target far away: the chest target moves at most the budget from the current chest
     far = replace(scene, characters=tuple(_translated(c, 0.0, 2.0) if c.name == "dodger" else c
                                           for c in scene.characters))
@@ -100,15 +100,15 @@ def test_targets_respect_the_reaction_time_budget(scene):
     chest = [t for t in targets if t.handle == "chest" and t.t == 1.0][0]
     from scenegraph.scene import handle_track
     now = handle_track(him, "chest", [1.0])[0]
-    assert np.linalg.norm(np.asarray(chest.point) - now) == pytest.approx(0.125, abs=1e-6)
+    assert np.linalg.norm(np.asarray(chest.point) - now) == pytest.approx(0.03125, abs=1e-6)
     handles = sorted(t.handle for t in targets)
-    assert handles == ["chest", "chest", "palm_l", "palm_r"]
+    assert handles == ["chest", "chest", "chest", "palm_l", "palm_r"]
     # avoid: escape springs only for handles inside the sphere, soft, within the budget
     targets, hard = goal_targets(scene, "dodger", ["dodge"], window=(0.5, 1.0))
     assert not hard and targets and all(not t.hard for t in targets)
     her = scene.character("dodger")
     for t in targets:
-        assert np.linalg.norm(np.asarray(t.point) - handle_track(her, t.handle, [1.0])[0]) <= 0.5 + 1e-9
+        assert np.linalg.norm(np.asarray(t.point) - handle_track(her, t.handle, [1.0])[0]) <= 0.125 + 1e-9
     targets, _ = goal_targets(far, "dodger", ["dodge"])
     assert targets == ()
 
