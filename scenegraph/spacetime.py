@@ -347,20 +347,30 @@ class StallMonitor(IterationCallback):
     Windows whose held boundary leaves residuals that cannot vanish are large-residual least
     squares; there the Gauss–Newton Hessian converges only linearly, and IPOPT can spend
     hundreds of iterations on the last digits of a flat objective.  ``stalled`` records why
-    the solve stopped.
+    the solve stopped; ``best_x`` is the best feasible iterate, which :func:`solve` returns
+    when IPOPT ends somewhere worse (warm-started from a good motion, IPOPT's first barrier
+    iterations can leave it and stall at a higher energy: a seam window started at E ≈ 1.4e3
+    stalled at 1.1e4).
     """
 
     def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray, patience: int):
         self.patience = patience
-        self.best, self.since, self.stalled = np.inf, 0, False
+        self.reset()
         super().__init__("stall_monitor", nx, ng, lbg, ubg)
+
+    def reset(self) -> None:
+        self.best, self.since, self.stalled, self.best_x = np.inf, 0, False, None
 
     def eval(self, arg):
         f = float(arg[ca.nlpsol_out().index("f")])
         viol = self.violation(arg[ca.nlpsol_out().index("g")])
+        if viol <= STALL_VIOL and f < self.best:
+            self.best_x = np.array(arg[ca.nlpsol_out().index("x")], float).ravel()
         if viol > STALL_VIOL:
             self.since = 0  # only feasible iterates count toward a stall
-        elif f < self.best - STALL_REL * max(1.0, abs(self.best)):
+        elif not np.isfinite(self.best) or f < self.best - STALL_REL * max(1.0, abs(self.best)):
+            # (the first feasible iterate must count: inf − REL·inf is nan, which compared
+            # false, so every solve used to "stall" 25 feasible iterates after it began)
             self.best, self.since = f, 0
         else:
             self.since += 1
@@ -823,9 +833,15 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     """Build (unless given) and solve a subproblem with IPOPT, warm-started from sp.motion."""
     t_start = _time.perf_counter()
     b = built or build(sp)
+    if b.monitor is not None:
+        b.monitor.reset()
     sol = b.solver(x0=b.x0, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, p=b.p)
     stats = b.solver.stats()
     x = np.asarray(sol["x"]).ravel()
+    f_final = float(sol["f"])
+    m_ = b.monitor
+    if m_ is not None and m_.best_x is not None and m_.best < f_final - STALL_REL * max(1.0, abs(f_final)):
+        x, f_final = m_.best_x, m_.best  # IPOPT ended worse than a feasible iterate it passed
     P, W, F, E, E0, FS = (np.asarray(v) for v in b.unpack(x, b.p))
     F = F.ravel()
     motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
@@ -859,4 +875,4 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     if b.monitor is not None and b.monitor.stalled and status == "User_Requested_Stop":
         status, ok = "Stalled", True
     return Result(motion, tuple(steps), status, ok, int(stats.get("iter_count", -1)),
-                  _time.perf_counter() - t_start, float(np.ravel(E)[0]), float(sol["f"]), viol, contact, sp.label)
+                  _time.perf_counter() - t_start, float(np.ravel(E)[0]), f_final, viol, contact, sp.label)

@@ -1,0 +1,29 @@
+"""The IPOPT iteration callback that stops stalled solves and remembers the best feasible iterate."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from scenegraph.spacetime import StallMonitor
+
+
+def _arg(x, f, g):
+    names = ca.nlpsol_out()
+    out = [ca.DM()] * len(names)  # IPOPT hands the callback DMs
+    out[names.index("x")] = ca.DM(x)
+    out[names.index("f")] = ca.DM(f)
+    out[names.index("g")] = ca.DM(g)
+    return out
+
+
+def test_best_feasible_iterate_is_kept_and_infeasible_ones_ignored():
+    m = StallMonitor(2, 1, np.array([0.0]), np.array([0.0]), patience=3)
+    m.eval(_arg([5.0, 5.0], 1.0, [0.5]))       # infeasible: not a candidate however low f is
+    assert m.best_x is None
+    m.eval(_arg([1.0, 2.0], 10.0, [0.0]))      # feasible
+    m.eval(_arg([3.0, 4.0], 12.0, [0.0]))      # feasible but worse
+    assert m.best == 10.0 and m.best_x.tolist() == [1.0, 2.0]
+    stops = [m.eval(_arg([3.0, 4.0], 12.0, [0.0]))[0] for _ in range(2)]
+    assert stops == [0, 1] and m.stalled      # three feasible iterates without improvement
+    m.reset()
+    assert m.best == np.inf and m.best_x is None and not m.stalled and m.since == 0
