@@ -147,8 +147,8 @@ class Subproblem:
     label: str = "step"
     ipopt_options: tuple = ()  # extra IPOPT options as (name, value) pairs (e.g. warm starts in NIO)
     nlpsol_options: tuple = ()  # extra CasADi nlpsol options as (name, value) pairs (e.g. iteration_callback)
-    stall_iterations: int = 0  # > 0: stop as "Stalled" (a success) when the objective has not improved by
-    # STALL_REL for this many iterations while every constraint holds to STALL_VIOL (see StallMonitor)
+    stall_iterations: int = 0  # > 0: stop as "Stalled" (a success) when the best feasible objective has
+    # improved by less than STALL_REL over this many feasible iterates (see StallMonitor)
     hessian: str = "gauss_newton"  # Hessian of the objective given to IPOPT: "gauss_newton" (2 JᵀJ) or
     # "exact" (adds 2 Σ r ∇²r: the compiled kernel Hessian chained through the splines; see build)
 
@@ -304,7 +304,8 @@ class Built:
     anchor_slices: tuple = ()  # slice into p of each spring's anchor (3 × N at s_points, column-major)
 
 
-STALL_REL = 1e-6  # relative objective improvement that counts as progress
+STALL_REL = 1e-3  # relative improvement of the best feasible objective over `patience` iterates that counts
+# as progress (a per-iterate 1e-6 let solves creep at 1e-5 per iterate up to their iteration cap)
 STALL_VIOL = 1e-5  # worst constraint violation (m, or the constraint's unit) of a stalled iterate
 
 
@@ -340,9 +341,9 @@ class IterationCallback(ca.Callback):
 
 
 class StallMonitor(IterationCallback):
-    """IPOPT iteration callback: stop once ``patience`` consecutive iterates satisfy every
-    constraint to STALL_VIOL without improving the best feasible objective by STALL_REL
-    (relative).
+    """IPOPT iteration callback: stop once the best feasible objective (every constraint held
+    to STALL_VIOL) has improved by less than STALL_REL (relative) over the last ``patience``
+    feasible iterates; an infeasible iterate restarts the count.
 
     Windows whose held boundary leaves residuals that cannot vanish are large-residual least
     squares; there the Gauss–Newton Hessian converges only linearly, and IPOPT can spend
@@ -359,24 +360,22 @@ class StallMonitor(IterationCallback):
         super().__init__("stall_monitor", nx, ng, lbg, ubg)
 
     def reset(self) -> None:
-        self.best, self.since, self.stalled, self.best_x = np.inf, 0, False, None
+        self.best, self.stalled, self.best_x = np.inf, False, None
+        self.trace: list[float] = []  # best feasible objective after each feasible iterate
 
     def eval(self, arg):
         f = float(arg[ca.nlpsol_out().index("f")])
-        viol = self.violation(arg[ca.nlpsol_out().index("g")])
-        if viol <= STALL_VIOL and f < self.best:
-            self.best_x = np.array(arg[ca.nlpsol_out().index("x")], float).ravel()
-        if viol > STALL_VIOL:
-            self.since = 0  # only feasible iterates count toward a stall
-        elif not np.isfinite(self.best) or f < self.best - STALL_REL * max(1.0, abs(self.best)):
-            # (the first feasible iterate must count: inf − REL·inf is nan, which compared
-            # false, so every solve used to "stall" 25 feasible iterates after it began)
-            self.best, self.since = f, 0
-        else:
-            self.since += 1
-        if self.since >= self.patience and viol <= STALL_VIOL:
-            self.stalled = True
-            return [1]
+        if self.violation(arg[ca.nlpsol_out().index("g")]) > STALL_VIOL:
+            self.trace.clear()
+            return [0]
+        if f < self.best:
+            self.best, self.best_x = f, np.array(arg[ca.nlpsol_out().index("x")], float).ravel()
+        self.trace.append(self.best)
+        if len(self.trace) > self.patience:
+            gained = self.trace[-1 - self.patience] - self.best
+            if gained <= STALL_REL * max(1.0, abs(self.best)):
+                self.stalled = True
+                return [1]
         return [0]
 
 
@@ -840,7 +839,7 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     x = np.asarray(sol["x"]).ravel()
     f_final = float(sol["f"])
     m_ = b.monitor
-    if m_ is not None and m_.best_x is not None and m_.best < f_final - STALL_REL * max(1.0, abs(f_final)):
+    if m_ is not None and m_.best_x is not None and m_.best < f_final - 1e-9 * max(1.0, abs(f_final)):
         x, f_final = m_.best_x, m_.best  # IPOPT ended worse than a feasible iterate it passed
     P, W, F, E, E0, FS = (np.asarray(v) for v in b.unpack(x, b.p))
     F = F.ravel()
