@@ -269,7 +269,7 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
         status, ok = "Stalled", True
     iters = int(stats.get("iter_count", -1))
     pa, pb = (np.asarray(v).ravel() for v in jb.p_of(x))
-    seconds = (jb.seconds_build if built is None else 0.0) + (t2 - t0)
+    seconds = t2 - t0  # build (unless given) + solve
     res = tuple(_character_result(b, x[sl], p, status, ok, iters, seconds, float(sol["f"]))
                 for b, sl, p in zip(jb.built, jb.slices[:2], (pa, pb)))
     ha, hb = (np.asarray(v) for v in jb.palms(x))

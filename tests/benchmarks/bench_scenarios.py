@@ -104,7 +104,9 @@ def monolithic(max_iter: int) -> dict:
     capped = jr.status == "Maximum_Iterations_Exceeded"
     return {"result": jr, "seconds": seconds, "presolve_s": t_pre, "converged": ok, "capped": capped,
             "gap": gap, "gap_120hz": dense_gap, "audits": audits, "goals": goals,
-            "force_max": float(np.linalg.norm(jr.force, axis=1).max())}
+            "force_max": float(np.linalg.norm(jr.force, axis=1).max()),
+            "force_max_t": float(jr.force_times[int(np.argmax(np.linalg.norm(jr.force, axis=1)))]),
+            "force_median": float(np.median(np.linalg.norm(jr.force, axis=1)))}
 
 
 def main(argv=None) -> None:
@@ -137,7 +139,7 @@ def main(argv=None) -> None:
         print(jr.summary(), flush=True)
         print(f"monolithic details: pre-solve {m['presolve_s']:.1f} s, build {jr.seconds_build:.1f} s, "
               f"IPOPT {jr.seconds_solve:.1f} s; hand gap {m['gap'] * 100:.3f} cm at 30 Hz, "
-              f"{m['gap_120hz'] * 100:.3f} cm at 120 Hz; max hand force {m['force_max']:.1f} N; audits {aud}; "
+              f"{m['gap_120hz'] * 100:.3f} cm at 120 Hz; hand force max {m['force_max']:.1f} N (at t = {m['force_max_t']:.3f} s), median {m['force_median']:.1f} N; audits {aud}; "
               f"goals {goals}", flush=True)
         if not math.isnan(handhold_s):
             ratio = m["seconds"] / handhold_s
