@@ -568,14 +568,14 @@ def _tackle_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float
     goal_speed = float(speed) if speed is not None else 1.1 * float(min_speed)
     other = scene.character(g.partner)
     t, lead = g.time, TACKLE_SPEED_LEAD
-    R, c = body_frames(other, "thorax", [t - lead, t])
+    R, c = body_frames(other, "thorax", [t - 0.01, t])  # her velocity at the impact (as measured)
     my_then, my = handle_track(me, "chest", [max(t - 0.25, me.motion.start), t])
     u = _horizontal_unit(c[1] - my_then)  # the approach direction (not the last instant's)
     u3, lat3 = np.r_[u, 0.0], np.r_[-u[1], u[0], 0.0]
     semi = other.character.body("thorax").semi_axes
     surf = _ray_to_surface(R[1], c[1], semi, -u3)
     chest = surf - u3 * me.character.body("thorax").semi_axes[0]
-    v_other = (c[1] - c[0]) / lead
+    v_other = (c[1] - c[0]) / 0.01
     shift = _clamp(my, chest, budget) - chest
     chest, c = chest + shift, c + shift
     out = [HandleTarget("chest", t, tuple(float(v) for v in chest), TARGET_WEIGHT, name=f"goal:{g.name}")]

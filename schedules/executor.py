@@ -201,10 +201,12 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
     return sp, mask
 
 
-def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...]) -> dict:
+def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: dict | None = None) -> dict:
     """Solve one Step against ``scene`` (a snapshot); returns the data a checkpoint stores.
 
     Top-level and pure (given its arguments) so that it runs the same in a worker process.
+    ``contacts`` (character → handle → (times, forces)): the contact forces so far, used as
+    the λ warm start of decreasing-horizon (``role == "horizon"``) steps.
     """
     out: dict = {"step": step.id, "characters": {}}
     cur = scene
@@ -218,6 +220,12 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...]) -> dict:
             if pre.success:
                 cur = cur.with_motion(who, pre.motion)
         sp, mask = _subproblem(cur, step, who)
+        if step.kind == FULL and contacts and contacts.get(who):
+            # λ from the forces of the character's last full steps, not a constant share: a
+            # decreasing-horizon window started at 100× its final objective and IPOPT left
+            # for a far worse basin (tackler E 3.3e3 → 4.9e4; warm-started: 3.1e3, contact
+            # within 0.3 mm); a walk_to_run window started at f = 7e4 and crept to its cap
+            sp = replace(sp, contact_guess=contacts[who])
         res = solve(sp)
         old = cur.character(who)
         motion = res.motion
@@ -433,10 +441,10 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                     todo.append(s)
             pre = {s.id: () for s in todo}  # kinematic pre-solves ran before the first generation
             if pool is not None and len(todo) > 1:
-                futures = [(s, pool.submit(solve_step, snapshot, s, pre[s.id])) for s in todo]
+                futures = [(s, pool.submit(solve_step, snapshot, s, pre[s.id], contact)) for s in todo]
                 pending = [(s, fu.result) for s, fu in futures]
             else:
-                pending = [(s, (lambda s=s: solve_step(snapshot, s, pre[s.id]))) for s in todo]
+                pending = [(s, (lambda s=s: solve_step(snapshot, s, pre[s.id], contact))) for s in todo]
             for s, get in pending:
                 t0 = time.perf_counter()
                 d = get()
