@@ -1,5 +1,5 @@
 """The IPOPT iteration callback that stops stalled solves and remembers the best feasible iterate
-(STALL_REL = 1e-3 relative over the patience window)."""
+(STALL_RATE = 0.1 % mean relative gain per iterate over the patience window)."""
 from __future__ import annotations
 
 import casadi as ca
@@ -26,7 +26,7 @@ def test_best_feasible_iterate_is_kept_and_infeasible_ones_ignored():
     assert m.best == 10.0 and m.best_x.tolist() == [1.0, 2.0]
     stops = [m.eval(_arg([3.0, 4.0], 12.0, [0.0]))[0] for _ in range(2)]
     assert stops == [0, 1] and m.stalled      # three feasible iterates without improvement
-    # slow but steady progress (1 % per iterate) does not stall; a 0.01 % creep does
+    # steady progress (1 % per iterate) does not stall; a 0.01 % creep does
     for f0, per, stalls in ((100.0, 0.99, False), (100.0, 0.9999, True)):
         m.reset()
         out = [m.eval(_arg([0.0, 0.0], f0 * per ** k, [0.0]))[0] for k in range(5)]
