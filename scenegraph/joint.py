@@ -259,10 +259,16 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
     t0 = _time.perf_counter()
     jb = built or build_joint(sp_a, sp_b, coupling)
     t1 = _time.perf_counter()
+    if jb.monitor is not None and hasattr(jb.monitor, "reset"):
+        jb.monitor.reset()
     sol = jb.solver(x0=jb.x0, lbx=jb.lbx, ubx=jb.ubx, lbg=jb.lbg, ubg=jb.ubg)
     t2 = _time.perf_counter()
     stats = jb.solver.stats()
     x = np.asarray(sol["x"]).ravel()
+    f_final = float(sol["f"])
+    m_ = jb.monitor  # as spacetime.solve: IPOPT ending worse than a feasible iterate it passed
+    if m_ is not None and getattr(m_, "best_x", None) is not None and m_.best < f_final - 1e-9 * max(1.0, abs(f_final)):
+        x, f_final = m_.best_x, m_.best
     status = stats.get("return_status", "unknown")
     ok = bool(stats.get("success", False)) or status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     if jb.monitor is not None and jb.monitor.stalled and status == "User_Requested_Stop":
@@ -270,7 +276,7 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
     iters = int(stats.get("iter_count", -1))
     pa, pb = (np.asarray(v).ravel() for v in jb.p_of(x))
     seconds = t2 - t0  # build (unless given) + solve
-    res = tuple(_character_result(b, x[sl], p, status, ok, iters, seconds, float(sol["f"]))
+    res = tuple(_character_result(b, x[sl], p, status, ok, iters, seconds, f_final)
                 for b, sl, p in zip(jb.built, jb.slices[:2], (pa, pb)))
     ha, hb = (np.asarray(v) for v in jb.palms(x))
     gap = float(np.linalg.norm(ha - hb, axis=0).max())
@@ -281,4 +287,4 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
     viol["coupling"] = float(np.abs(ha - hb).max())
     force = F_SCALE * x[jb.slices[2]].reshape(-1, 3)  # column-major (3, nc) -> rows per time
     return JointResult(res, np.asarray(coupling.times, float), force, status, ok, iters, seconds,
-                       jb.seconds_build if built is None else 0.0, t2 - t1, float(sol["f"]), gap, viol)
+                       jb.seconds_build if built is None else 0.0, t2 - t1, f_final, gap, viol)
