@@ -81,3 +81,15 @@ def test_root_residual_balances_only_with_the_coupling_force(joint):
         assert full.root_residual_rel <= 1e-3, full
         assert without.root_residual_max > 3 * full.root_residual_max + 1.0, (without, full)
         assert flipped.root_residual_max > 3 * full.root_residual_max + 1.0, (flipped, full)
+
+
+def test_force_interpolation_and_held_timewarp_required():
+    from scenegraph.joint import _interp_matrix
+
+    M = _interp_matrix(np.array([0.0, 0.1, 0.2]), np.array([-0.05, 0.0, 0.05, 0.2, 0.25]))
+    np.testing.assert_allclose(M, [[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0], [0, 0, 1], [0, 0, 0]])
+    ch = make_character()
+    steps = standing_footsteps((0.0, 0.0, 0.0), 0.0, T, _foot_length(ch))
+    sp = Subproblem(ch, default_style(ch.total_mass), initial_motion(ch, steps, 0.0, T), steps)  # warp free
+    with pytest.raises(ValueError, match="timewarp"):
+        solve_joint(sp, sp, JointCoupling("palm_r", "palm_l", coupling_times((0.0, T))))
