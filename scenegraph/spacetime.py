@@ -150,7 +150,8 @@ class Subproblem:
     stall_iterations: int = 0  # > 0: stop as "Stalled" (a success) when the best feasible objective has
     # improved by less than STALL_RATE per iterate over this many feasible iterates (see StallMonitor)
     hessian: str = "gauss_newton"  # Hessian of the objective given to IPOPT: "gauss_newton" (2 JᵀJ) or
-    # "exact" (adds 2 Σ r ∇²r: the compiled kernel Hessian chained through the splines; see build)
+    # "exact" (adds 2 Σ r ∇²r: the compiled kernel Hessian chained through the splines; see build);
+    # "gauss_newton_objective" (an experiment: 2 JᵀJ without the constraints' curvature; README)
 
 
 @dataclass
