@@ -194,7 +194,7 @@ def test_synthetic_recovery():
     assert r["rms_learned"] <= 2.0 < r["rms_default"]
 
 
-def synthetic_recovery(hessian: str = "gauss_newton") -> dict:
+def synthetic_recovery(hessian: str = "gauss_newton", local: bool = True, max_iter: int = MAX_NIO_ITER) -> dict:
     """The synthetic recovery experiment with the spacetime Hessian ``hessian`` in every IPOPT
     solve (X_T's pipeline, the re-syntheses; NIO's local counterexample is a Gauss–Newton step
     either way); prints and returns its numbers."""
@@ -214,13 +214,13 @@ def synthetic_recovery(hessian: str = "gauss_newton") -> dict:
                                 ipopt_options=(("acceptable_iter", 0),), hessian=hessian)).motion
 
     XT = pipeline(star)
-    nio = NIO(ch, XT, fs, cyclic=True, local=True, hessian=hessian)
+    nio = NIO(ch, XT, fs, cyclic=True, local=local, hessian=hessian)
     g_star = nio.evaluate(star.vector()).G  # the floor: X_T is not exactly stationary under θ*
     hist = []
-    out = nio.run(d.vector(), max_iter=MAX_NIO_ITER, rtol=0.003, patience=6, callback=hist.append)
+    out = nio.run(d.vector(), max_iter=max_iter, rtol=0.003, patience=6, callback=hist.append)
     rms = {name: joint_rms_deg(pipeline(st), XT) for name, st in (("learned", out.style), ("default", d))}
     lr = np.abs(np.log(out.style.alpha / star.alpha)).mean()
-    print(f"[{hessian}] G {out.g_initial:.4g} -> {out.g_final:.4g} (ratio {out.g_final / out.g_initial:.3g}; "
+    print(f"[{hessian}, local={local}] G {out.g_initial:.4g} -> {out.g_final:.4g} (ratio {out.g_final / out.g_initial:.3g}; "
           f"G(theta*) {g_star:.3g}; {out.stop_reason}, {out.iterations} iterations, {out.seconds:.0f} s); "
           "resynth rms deg: " + ", ".join(f"{k} {v:.2f}" for k, v in rms.items())
           + f"; alpha mean |log a/a*| learned {lr:.3f} default {np.abs(np.log(d.alpha / star.alpha)).mean():.3f}",
