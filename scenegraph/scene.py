@@ -46,7 +46,6 @@ TACKLE_SPEED_LEAD = 0.1    # s: the speed is asked for as a chest position this 
 AVOID_MARGIN = 0.08        # m: the escape target lies this far outside the avoided sphere
 REACH_ACCEL = 1.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
 #                            time from the start of the optimised window to the goal (reaction time)
-AVOID_LEAD = 0.05          # s: the escape is asked at the goal time and this long before it
 AVOID_WEIGHT = 300.0       # soft escape springs (same units as TARGET_WEIGHT; 1000 made IPOPT oscillate)
 TORSO_BODIES = ("thorax", "abdomen")
 
@@ -598,8 +597,8 @@ def _avoid_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float 
     The pelvis and chest that are inside the sphere (+ AVOID_MARGIN) at the goal time are
     pulled out of it sideways to the other's approach — horizontally, perpendicular to its
     chest velocity, on the side the pelvis already is (or the side it moves toward) — by at
-    most ``budget``; the same displacement is asked AVOID_LEAD s earlier, so that the body
-    is out of the way instead of flinging the chest out at the last instant.  Soft, so that a
+    most ``budget`` (asking the same displacement 0.05 s earlier as well made the dodger's
+    first solve creep to its iteration cap).  Soft, so that a
     dodge that cannot be done with physical forces is traded off against the dynamics
     instead of being forced by non-physical root forces (a hard sphere constraint did exactly
     that: root residuals of 0.6 body weight in the short late windows)."""
@@ -615,7 +614,7 @@ def _avoid_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float 
     need = g.data[0] + AVOID_MARGIN
     out = []
     for hd in ("pelvis", "chest"):
-        p_then, p = handle_track(me, hd, [t - AVOID_LEAD, t])
+        p = handle_track(me, hd, [t])[0]
         w = p - centre
         if float(np.linalg.norm(w)) >= need:
             continue
@@ -623,9 +622,7 @@ def _avoid_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float 
         b = float(np.dot(w, u))
         s_ = -b + math.sqrt(max(b * b - (float(np.dot(w, w)) - need * need), 0.0))
         d = _clamp(p, p + s_ * u, budget) - p
-        for tt, pp in ((t, p), (t - AVOID_LEAD, p_then)):
-            out.append(HandleTarget(hd, float(tt), tuple(float(x) for x in pp + d), AVOID_WEIGHT,
-                                    name=f"goal:{g.name}"))
+        out.append(HandleTarget(hd, float(t), tuple(float(x) for x in p + d), AVOID_WEIGHT, name=f"goal:{g.name}"))
     return out
 
 
