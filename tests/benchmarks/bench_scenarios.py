@@ -18,7 +18,7 @@ monolithic_ratio = (monolithic time: pre-solve + build + solve, or its time at t
 iteration limit) / (handhold schedule time: the whole ``run_scenario``).  Printed before
 the last line: ``monolithic: converged|iteration limit|failed ...``.  Last line, exactly:
 tackle_s=<float> handhold_s=<float> monolithic_ratio=<float>
-(nan for a part that was skipped.)
+(nan for a part that was skipped or a run that failed: a step did not converge.)
 """
 from __future__ import annotations
 
@@ -33,12 +33,18 @@ from pathlib import Path
 import numpy as np
 
 
-def run_bundled(name: str, tmp: Path) -> tuple[float, dict]:
+def run_bundled(name: str, tmp: Path) -> tuple[float, dict | None]:
+    """(wall seconds, report); report None when the run failed (a step did not converge)."""
+    from scenarios.errors import ComposeError
     from schedules.cli_run import run_scenario
 
     t = time.perf_counter()
-    rep = run_scenario(name, out=str(tmp / f"{name}.usda"), report=str(tmp / f"{name}.report.json"),
-                       run_dir=str(tmp / "runs" / name), log=sys.stderr)
+    try:
+        rep = run_scenario(name, out=str(tmp / f"{name}.usda"), report=str(tmp / f"{name}.report.json"),
+                           run_dir=str(tmp / "runs" / name), log=sys.stderr)
+    except ComposeError as exc:
+        print(f"{name}: FAILED after {time.perf_counter() - t:.1f} s: {exc}", flush=True)
+        return time.perf_counter() - t, None
     return time.perf_counter() - t, rep
 
 
@@ -119,14 +125,21 @@ def main(argv=None) -> None:
     tackle_s = handhold_s = ratio = math.nan
     with tempfile.TemporaryDirectory(prefix="bench_scenarios_") as d:
         tmp = Path(d)
+        # a run that fails (exit 1: a step did not converge) reports nan: it has no time to a result
         if not args.skip_tackle:
             tackle_s, rep = run_bundled("tackle", tmp)
-            print(scenario_line("tackle", tackle_s, rep), flush=True)
+            if rep is None:
+                tackle_s = math.nan
+            else:
+                print(scenario_line("tackle", tackle_s, rep), flush=True)
         if not args.skip_handhold:
             handhold_s, rep = run_bundled("handhold", tmp)
-            print(scenario_line("handhold", handhold_s, rep), flush=True)
-            hh_ok = rep["all_audits_pass"] and rep["all_goals_hold"]
-            print(f"handhold schedule reaches its tolerance: {'yes' if hh_ok else 'NO'}", flush=True)
+            if rep is None:
+                handhold_s = math.nan
+            else:
+                print(scenario_line("handhold", handhold_s, rep), flush=True)
+                hh_ok = rep["all_audits_pass"] and rep["all_goals_hold"]
+                print(f"handhold schedule reaches its tolerance: {'yes' if hh_ok else 'NO'}", flush=True)
     if not args.skip_monolithic:
         m = monolithic(args.mono_max_iter)
         jr = m["result"]
