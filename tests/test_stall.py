@@ -27,6 +27,12 @@ def test_best_feasible_iterate_is_kept_and_infeasible_ones_ignored():
     stops = [m.eval(_arg([3.0, 4.0], 12.0, [0.0]))[0] for _ in range(2)]
     assert stops == [0, 1] and m.stalled      # three feasible iterates without improvement
     # steady progress (1 % per iterate) does not stall; a 0.01 % creep does
+    # infeasible iterates in between neither count nor restart the count
+    m.reset()
+    out = []
+    for k in range(8):
+        out.append(m.eval(_arg([0.0, 0.0], 5.0, [0.0] if k % 2 == 0 else [1.0]))[0])
+    assert out.index(1) == 6, out  # the 4th feasible iterate: 3 without gain after the first
     for f0, per, stalls in ((100.0, 0.99, False), (100.0, 0.9999, True)):
         m.reset()
         out = [m.eval(_arg([0.0, 0.0], f0 * per ** k, [0.0]))[0] for k in range(5)]
