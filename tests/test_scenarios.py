@@ -42,7 +42,7 @@ def test_names_agree_with_character_model():
 # --- bundled scenarios --------------------------------------------------------------------------
 
 def test_bundled_scenarios_present():
-    assert {"walk", "walk_to", "two_walkers", "walk_to_run", "handhold", "tackle",
+    assert {"walk", "walk_to", "two_walkers", "walk_to_run", "handhold", "tackle", "tackle_dodge", "two_tacklers",
             "suitcase", "limp", "uphill", "downhill", "turn180", "springy_run"} <= set(BUNDLED)
     assert "default" in bundled_styles()
 
