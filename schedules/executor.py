@@ -46,7 +46,7 @@ from scenegraph.spacetime import HandleTarget, Subproblem, _window_mask, solve
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
 
-from .step import FULL, Schedule, Step
+from .step import COUPLED, FULL, Schedule, Step
 
 __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
            "run_fingerprint"]
@@ -155,6 +155,15 @@ def _hard_violations(viol: dict) -> dict:
     return {k: v for k, v in viol.items() if v > VIOLATION_TOL}
 
 
+COUPLED_FULL_MAX_ITER = 100  # a coupled character's full step: one move of the alternation (thesis §6.4.3)
+
+
+def _iteration_cap(step: Step) -> int:
+    if step.kind != FULL:
+        return 100
+    return COUPLED_FULL_MAX_ITER if COUPLED in step.schedules else 300
+
+
 def _gait_change(scene: Scene, who: str) -> bool:
     return any(g.type == "style_change" and g.character == who and g.data[1] is not None for g in scene.goals)
 
@@ -195,7 +204,7 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
         style_end = None
     sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
                     dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid, springs=springs,
-                    style_end=style_end, max_iter=_max_iter(300 if step.kind == FULL else 100),
+                    style_end=style_end, max_iter=_max_iter(_iteration_cap(step)),
                     label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS,
                     soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
@@ -382,7 +391,10 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
 
     A full step must converge.  With ``accept_capped`` one that reached its iteration cap
     with every hard constraint satisfied is kept instead (feasible, not converged: its status
-    stays in the report and a warning line is printed; the audit tells how good it is)."""
+    stays in the report and a warning line is printed; the audit tells how good it is).  The
+    moves of decreasing-horizon and coupled schedules are always kept that way: the thesis
+    cuts those subproblems short on purpose (coupled full steps are capped at
+    COUPLED_FULL_MAX_ITER)."""
     run_dir = Path(run_dir)
     prepare_run_dir(run_dir, fingerprint, resume)
     order = schedule.order()
@@ -476,7 +488,10 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                 # decreasing-horizon steps are moves of an adversarial game, each cut short at its
                 # cap (thesis §6.4.3/6.4.4: subproblems terminated after a number of iterations);
                 # one that holds every constraint is kept — the final audit and goals judge the run
-                accepted = rec.success or (capped and s.kind == FULL and (accept_capped or s.role == "horizon"))
+                # so are coupled characters' (thesis §6.4.3: terminating each subproblem after a
+                # small number of steps lets the partners adjust to each other gradually)
+                accepted = rec.success or (capped and s.kind == FULL
+                                           and (accept_capped or s.role == "horizon" or COUPLED in s.schedules))
                 if s.kind == FULL and capped and accepted and not bad:
                     print(f"    warning: {s.id} reached its iteration cap; kept as feasible, not converged",
                           file=log, flush=True)
