@@ -43,7 +43,10 @@ def main() -> None:
     ap.add_argument("--resynth-iter", type=int, default=300)
     ap.add_argument("--out", default=None, help="also write the learned style here")
     ap.add_argument("--hessian", default="gauss_newton", choices=("gauss_newton", "exact"),
-                    help="spacetime Hessian of the counterexamples and re-syntheses (Subproblem.hessian)")
+                    help="spacetime Hessian of the IPOPT solves: re-syntheses, ipopt counterexamples (Subproblem.hessian)")
+    ap.add_argument("--counterexamples", default="local", choices=("local", "ipopt"),
+                    help="local: one Gauss-Newton step from X_T (default); ipopt: spacetime solves (NIO local=False)")
+    ap.add_argument("--solve-iter", type=int, default=150, help="IPOPT iterations per ipopt counterexample")
     args = ap.parse_args()
     frames = parse_frames(args.frames)
 
@@ -57,7 +60,8 @@ def main() -> None:
     t = time.perf_counter()
     res = learn_style(ch, XT, steps, name=Path(args.out).stem if args.out else "walk", clip=Path(args.clip).name,
                       frames=args.frames,
-                      body="adult_male", callback=progress, max_iter=args.max_iter, hessian=args.hessian)
+                      body="adult_male", callback=progress, max_iter=args.max_iter, hessian=args.hessian,
+                      local=args.counterexamples == "local", solve_iter=args.solve_iter)
     nio_s = time.perf_counter() - t
     print(f"stop: {res.stop_reason}; evaluations {res.evaluations}", flush=True)
 
