@@ -2,11 +2,16 @@
 
 ``build_scene(scenario)`` gives, per character, its :class:`~scenegraph.body.Character`
 (preset plus edits), its styles, its footsteps (explicit footprints, or free footsteps
-generated for ``walk_to``, or both feet planted for a character without locomotion goals),
-and an initial :class:`~scenegraph.motion.Motion` over [0, duration].  Goals that become
+generated for ``walk_to``, a run through the impact point for a tackler, a walk straight
+ahead for a tackle/avoid target without a walk of its own, or both feet planted for a
+character without locomotion goals), and an initial :class:`~scenegraph.motion.Motion` over
+[0, duration] (running poses for a tackler).  Goals that become
 solver terms (reach, tackle, avoid, walk_to end point) are described by :class:`GoalSpec`;
 their solver targets depend on the partners' *current* motions and are computed on demand
-with :func:`goal_targets` / :func:`coupling_targets`.
+with :func:`goal_targets` / :func:`coupling_targets`.  Tackle and avoid are soft springs
+(never hard spheres) limited by the reaction time left in the optimised window
+(:func:`reach_budget`); :func:`tackle_measure` / :func:`avoid_measure` measure them for the
+report.
 
 Scenario files use degrees; everything here is in radians (SI units otherwise).
 The Scene is immutable: ``scene.with_motion(name, motion, footsteps)`` returns a new one.
