@@ -12,8 +12,10 @@ Collocation points are uniform in canonical time s; the energy (paper Eq. 13)
 is a sum of squares of residuals computed by one per-point kernel (inverse dynamics plus
 passive, contact and shoe terms) that is compiled to C with its first derivatives.
 IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals) plus the exact Hessian of
-the kinematic constraints: second derivatives of the dynamics are never formed.  Style θ
-and all fixed data are NLP parameters, so one built problem serves many solves (NIO).
+the kinematic constraints by default; ``Subproblem(hessian="exact")`` adds the residual
+curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`kernel_hessian`, chained
+through the splines; see README "Exact Hessian" for what it measured).  Style θ and all
+fixed data are NLP parameters, so one built problem serves many solves (NIO).
 
 Constraints: footsteps (planted handles at their footprint on the ground), ground
 non-penetration of the foot handles, feet not crossing (thesis Eq. 6.3), joint limits
