@@ -178,7 +178,7 @@ def goal_verdict(goals: dict, couplings: dict) -> dict:
 # --- the command -------------------------------------------------------------------------------
 
 def run_scenario(name_or_file: str, *, out: str | None = None, report: str | None = None, jobs: int = 1,
-                 resume: bool = False, run_dir: str | None = None, fps: float = 30.0, accept_capped: bool = False,
+                 resume: bool = False, run_dir: str | None = None, fps: float = 30.0, fail_capped: bool = False,
                  log=sys.stderr) -> dict:
     """Run a scenario end to end; returns the report dict.  Raises ComposeError on failure."""
     from scenegraph.audit import audit_motion
@@ -211,7 +211,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
     print(f"compose: running {scn.name!r}: {len(schedule)} steps, {len(schedule.generations())} generation(s), "
           f"jobs {jobs}, run folder {rdir}", file=log, flush=True)
     result = run_schedule(scene, schedule, run_dir=rdir, fingerprint=fp, jobs=jobs, resume=resume,
-                          accept_capped=accept_capped, log=log)
+                          fail_capped=fail_capped, log=log)
     final = result.scene
 
     audits = {}
@@ -311,7 +311,7 @@ def _json_default(o):
 
 def _run(args) -> int:
     rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
-                       run_dir=args.run_dir, fps=args.fps, accept_capped=args.accept_capped)
+                       run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped)
     # exit 0: every physics audit passes and, in adversarial scenes, the goals of the side that
     # plans last hold (the other side's goals are expected to fail and do not decide it)
     return 0 if rep["all_audits_pass"] and rep["winners_goals_hold"] else 1
@@ -330,7 +330,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", action="store_true", help="continue an interrupted run from its run folder")
     p.add_argument("--run-dir", metavar="DIR", help="checkpoint folder; default runs/<scenario name>")
     p.add_argument("--fps", type=float, default=30.0, help="frame rate of the exported stage (default 30)")
-    p.add_argument("--accept-capped", action="store_true",
-                   help="keep a full step that stopped at its iteration cap with every constraint satisfied "
-                        "(default: such a step fails the run)")
+    p.add_argument("--fail-capped", action="store_true",
+                   help="fail the run when a full step stops at its iteration cap, even with every constraint "
+                        "satisfied (default: such a step is kept, with its status in the report)")
     p.set_defaults(func=_run)

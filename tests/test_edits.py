@@ -324,8 +324,9 @@ def test_limp_keeps_the_knee_locked_and_twists_the_pelvis_more(tmp_path_factory)
     assert hip.min() >= -15.0 - 1e-6 and hip.max() <= 25.0 + 1e-6
     yaw_w = np.degrees(np.ptp(dof_track(walk.character, walk.motion, "root_yaw")))
     yaw_l = np.degrees(np.ptp(dof_track(limp.character, limp.motion, "root_yaw")))
-    # measured: pelvis yaw 20.8° → 26.7° peak to peak
-    assert yaw_l >= 1.2 * yaw_w, (yaw_w, yaw_l)
+    # measured: pelvis yaw 20.8° → 26.7° peak to peak with the old (buggy) stall rule; 23.4° →
+    # 26.6° (+14 %) with full steps that run to the fixed stall rule
+    assert yaw_l >= 1.1 * yaw_w, (yaw_w, yaw_l)
 
 
 @pytest.mark.slow
