@@ -277,12 +277,16 @@ def solved(name: str, tmp_path_factory):
 @pytest.mark.parametrize("name", ("walk",) + EDITS)
 def test_edited_scenario_solves_with_goals_and_audit(name, tmp_path_factory):
     st, aud, goals, records = solved(name, tmp_path_factory)
-    # every step was accepted by the executor (converged, or "Stalled": its stall detection
-    # keeps a full step whose objective stopped falling with every constraint satisfied)
+    # every step was accepted by the executor (converged, "Stalled": its stall detection keeps
+    # a full step whose objective stopped falling, or capped: kept at its iteration cap — both
+    # only with every hard constraint satisfied)
     # (a timing step is only a warm start: one that did not converge is discarded and reported)
+    from schedules.executor import VIOLATION_TOL
     for r in records:
         if r.kind == "full":
-            assert r.status in ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Stalled"), (r.id, r.status)
+            assert r.status in ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Stalled",
+                                "Maximum_Iterations_Exceeded"), (r.id, r.status)
+            assert all(v <= VIOLATION_TOL for v in r.violations.values()), (r.id, r.violations)
     assert goals and all(g["holds"] for g in goals.values()), goals
     # the audit at 120 Hz passes the gate `compose run` applies (exit 1 otherwise)
     from schedules.cli_run import AUDIT_TOLERANCES
