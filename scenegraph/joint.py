@@ -33,10 +33,8 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from .body import G
-from .dynamics import friction_basis
-from .motion import Motion, basis
-from .spacetime import (Built, Result, Spring, StallMonitor, Subproblem, build, handles_kernel,
+from .motion import basis
+from .spacetime import (Built, Result, Spring, StallMonitor, Subproblem, build, handles_kernel, read_solution,
                         violations)
 
 __all__ = ["JointCoupling", "JointResult", "build_joint", "solve_joint", "coupling_times", "F_SCALE",
@@ -221,36 +219,9 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> 
 def _character_result(b: Built, x: np.ndarray, p: np.ndarray, status: str, ok: bool, iterations: int,
                       seconds: float, objective: float) -> Result:
     """A per-character Result read off the joint solution (as spacetime.solve reads its own)."""
-    sp = b.sp
-    P, W, F, E, _, FS = (np.asarray(v) for v in b.unpack(x, p))
-    F = F.ravel()
-    motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
-    steps = list(sp.footsteps)
-    for j, si in enumerate(b.free_steps):
-        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
-    mg = sp.character.total_mass * G
-    forces: dict = {}
-    for c, (h, k, sl) in enumerate(b.contact_index):
-        V = b.contact_basis[c] if b.contact_basis else friction_basis()
-        forces.setdefault(h, []).append((float(motion.time([b.s_points[k]])[0]), mg * V @ x[sl]))
-    contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
-    t_pts = motion.time(b.s_points)
-    for j, h in enumerate(b.spring_handles):  # the coupling force: an external force at the handle
-        fj = FS[3 * j:3 * j + 3, :].T
-        on = (t_pts >= sp.springs[j].times[0] - 1e-9) & (t_pts <= sp.springs[j].times[-1] + 1e-9)
-        if h in contact:  # (a palm is never a ground contact; kept general as in spacetime.solve)
-            t_old, f_old = contact[h]
-            t_all = np.unique(np.r_[t_old, t_pts[on]])
-            f_all = np.zeros((len(t_all), 3))
-            for tt, ff in zip(t_old, f_old):
-                f_all[np.argmin(np.abs(t_all - tt))] += ff
-            for tt, ff in zip(t_pts[on], fj[on]):
-                f_all[np.argmin(np.abs(t_all - tt))] += ff
-            contact[h] = (t_all, f_all)
-        elif on.any():
-            contact[h] = (t_pts[on], fj[on])
-    return Result(motion, tuple(steps), status, ok, iterations, seconds, float(np.ravel(E)[0]), objective,
-                  violations(b, x, p), contact, sp.label)
+    motion, steps, energy, contact = read_solution(b, x, p)
+    return Result(motion, steps, status, ok, iterations, seconds, energy, objective,
+                  violations(b, x, p), contact, b.sp.label)
 
 
 def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,

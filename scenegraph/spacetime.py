@@ -41,7 +41,7 @@ from .kinematics import frame_transforms, handle_position
 from .motion import Motion, basis
 from .style import Style
 
-__all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Avoid", "Spring", "Result", "solve", "build",
+__all__ = ["read_solution", "Subproblem", "HandleTarget", "PoseTarget", "Avoid", "Spring", "Result", "solve", "build",
            "CONTACT_HANDLES", "residual_kernel", "W_ROOT"]
 
 W_ROOT = 100.0  # paper: weight of the root residual
@@ -831,6 +831,41 @@ def violations(b: Built, x: np.ndarray, p: np.ndarray | None = None) -> dict[str
     return out
 
 
+def read_solution(b: Built, x: np.ndarray, p: np.ndarray) -> tuple[Motion, tuple, float, dict]:
+    """(motion, footsteps, energy, forces) of a solution vector ``x`` of ``b`` with parameters
+    ``p``; forces: handle → (world times s, forces N (n, 3)), contact forces from λ plus each
+    spring's force over its interval (external forces at their handle, for the audit)."""
+    sp = b.sp
+    P, W, F, E, _, FS = (np.asarray(v) for v in b.unpack(x, p))
+    F = F.ravel()
+    motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
+    steps = list(sp.footsteps)
+    for j, si in enumerate(b.free_steps):
+        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
+    mg = sp.character.total_mass * G
+    forces: dict = {}
+    for c, (h, k, sl) in enumerate(b.contact_index):
+        V = b.contact_basis[c] if b.contact_basis else friction_basis()
+        forces.setdefault(h, []).append((float(motion.time([b.s_points[k]])[0]), mg * V @ x[sl]))
+    contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
+    t_pts = motion.time(b.s_points)
+    for j, h in enumerate(b.spring_handles):
+        fj = FS[3 * j:3 * j + 3, :].T
+        on = (t_pts >= sp.springs[j].times[0] - 1e-9) & (t_pts <= sp.springs[j].times[-1] + 1e-9)
+        if h in contact:
+            t_old, f_old = contact[h]
+            t_all = np.unique(np.r_[t_old, t_pts[on]])
+            f_all = np.zeros((len(t_all), 3))
+            for tt, ff in zip(t_old, f_old):
+                f_all[np.argmin(np.abs(t_all - tt))] += ff
+            for tt, ff in zip(t_pts[on], fj[on]):
+                f_all[np.argmin(np.abs(t_all - tt))] += ff
+            contact[h] = (t_all, f_all)
+        elif on.any():
+            contact[h] = (t_pts[on], fj[on])
+    return motion, tuple(steps), float(np.ravel(E)[0]), contact
+
+
 def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Result:
     """Build (unless given) and solve a subproblem with IPOPT, warm-started from sp.motion."""
     t_start = _time.perf_counter()
@@ -844,37 +879,11 @@ def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Re
     m_ = b.monitor
     if m_ is not None and m_.best_x is not None and m_.best < f_final - 1e-9 * max(1.0, abs(f_final)):
         x, f_final = m_.best_x, m_.best  # IPOPT ended worse than a feasible iterate it passed
-    P, W, F, E, E0, FS = (np.asarray(v) for v in b.unpack(x, b.p))
-    F = F.ravel()
-    motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
-    steps = list(sp.footsteps)
-    for j, si in enumerate(b.free_steps):
-        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
+    motion, steps, energy, contact = read_solution(b, x, b.p)
     viol = violations(b, x)
-    mg = sp.character.total_mass * G
-    forces: dict = {}
-    for c, (h, k, sl) in enumerate(b.contact_index):
-        V = b.contact_basis[c] if b.contact_basis else friction_basis()
-        forces.setdefault(h, []).append((float(motion.time([b.s_points[k]])[0]), mg * V @ x[sl]))
-    contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
-    t_pts = motion.time(b.s_points)
-    for j, h in enumerate(b.spring_handles):  # spring forces count as external forces at their handle
-        fj = FS[3 * j:3 * j + 3, :].T
-        on = np.any(fj != 0.0, axis=1)
-        if h in contact:
-            t_old, f_old = contact[h]
-            t_all = np.unique(np.r_[t_old, t_pts[on]])
-            f_all = np.zeros((len(t_all), 3))
-            for tt, ff in zip(t_old, f_old):
-                f_all[np.argmin(np.abs(t_all - tt))] += ff
-            for tt, ff in zip(t_pts[on], fj[on]):
-                f_all[np.argmin(np.abs(t_all - tt))] += ff
-            contact[h] = (t_all, f_all)
-        elif on.any():
-            contact[h] = (t_pts[on], fj[on])
     status = stats.get("return_status", "unknown")
     ok = bool(stats.get("success", False)) or status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     if b.monitor is not None and b.monitor.stalled and status == "User_Requested_Stop":
         status, ok = "Stalled", True
     return Result(motion, tuple(steps), status, ok, int(stats.get("iter_count", -1)),
-                  _time.perf_counter() - t_start, float(np.ravel(E)[0]), f_final, viol, contact, sp.label)
+                  _time.perf_counter() - t_start, energy, f_final, viol, contact, sp.label)
