@@ -39,7 +39,7 @@ from .style import Style, default_style, load_style
 
 __all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets",
            "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH",
-           "adversarial_plans_last", "tackle_measure", "avoid_measure", "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL"]
+           "adversarial_plans_last", "tackle_measure", "TARGET_WEIGHT", "AVOID_WEIGHT", "START_WEIGHT", "avoid_measure", "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL"]
 
 CADENCE = 1.85          # steps per second of generated walks
 STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
@@ -51,6 +51,7 @@ TACKLE_SPEED_LEAD = 0.1    # s: the speed is asked for as a chest position this 
 AVOID_MARGIN = 0.08        # m: the escape target lies this far outside the avoided sphere
 REACH_ACCEL = 1.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
 #                            time from the start of the optimised window to the goal (reaction time)
+START_WEIGHT = 100.0       # soft spring holding the pelvis at the character's start position (same units)
 AVOID_WEIGHT = 300.0       # soft escape springs (same units as TARGET_WEIGHT; 1000 made IPOPT oscillate)
 TORSO_BODIES = ("thorax", "abdomen")
 

@@ -46,6 +46,8 @@ import networkx as nx
 from scenarios.schema import (AvoidGoal, FootprintsGoal, ReachGoal, Scenario, ScheduleSpec,
                               StyleChangeGoal, TackleGoal, WalkToGoal)
 
+from scenegraph.scene import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
+
 from .step import (COUPLED, DECREASING_HORIZON, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)
 
@@ -132,7 +134,6 @@ class _Structure:
     graph: nx.Graph  # characters; edges carry "couplings" and "adversarial" name lists
     goals_of: dict[str, list[tuple[str, object]]]
     couplings_of: dict[str, list[tuple[str, object, list[str]]]]
-    impacts_of: dict[str, list[tuple[str, TackleGoal]]]
     plans_last: set[str]
     style_changes: dict[str, list[StyleChangeGoal]]
 
@@ -149,13 +150,11 @@ def _structure(scn: Scenario) -> _Structure:
         g.edges[a, b][key].append(label)
 
     goals_of: dict[str, list] = {n: [] for n in names}
-    impacts_of: dict[str, list] = {n: [] for n in names}
     style_changes: dict[str, list] = {n: [] for n in names}
     pair_last: dict[frozenset, list[tuple[str | None, str]]] = {}
     for gname, goal in scn.named_goals():
         if isinstance(goal, TackleGoal):
             goals_of[goal.attacker].append((gname, goal))
-            impacts_of[goal.target].append((gname, goal))
             link(goal.attacker, goal.target, "adversarial", gname)
             pair_last.setdefault(frozenset((goal.attacker, goal.target)), []).append((goal.plans_last, goal.attacker))
         elif isinstance(goal, AvoidGoal):
@@ -182,7 +181,7 @@ def _structure(scn: Scenario) -> _Structure:
     for choices in pair_last.values():
         explicit = sorted({c for c, _ in choices if c is not None})
         plans_last.add(explicit[0] if explicit else sorted(d for _, d in choices)[0])
-    return _Structure(scn, spec, names, g, goals_of, couplings_of, impacts_of, plans_last, style_changes)
+    return _Structure(scn, spec, names, g, goals_of, couplings_of, plans_last, style_changes)
 
 
 def _style_timeline(st: _Structure, ch: str, seams: dict[float, tuple[float, float]]) -> StyleTimeline:
@@ -233,13 +232,21 @@ def _goal_active(goal, window: tuple[float, float]) -> bool:
     return False
 
 
+def _goal_weight(goal) -> object:
+    """How the executor enforces a goal: footprints are hard constraints; walk_to, reach and
+    tackle are soft springs of weight TARGET_WEIGHT, avoid of AVOID_WEIGHT (scene.goal_targets)."""
+    if isinstance(goal, FootprintsGoal):
+        return HARD
+    return AVOID_WEIGHT if isinstance(goal, AvoidGoal) else TARGET_WEIGHT
+
+
 def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ...]:
     T = st.scn.duration
     w = b.window
     terms: list[tuple[str, object]] = [("energy", 1.0), ("dynamics", RELAXED if kind == TIMING else HARD),
                                        ("environment", HARD)]
     if w[0] <= EPS:
-        terms.append(("start", HARD))
+        terms.append(("start", START_WEIGHT))
     else:
         terms.append(("boundary:start", HARD))
     if w[1] < T - EPS:
@@ -249,10 +256,7 @@ def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ..
     for ch in b.characters:
         for gname, goal in st.goals_of[ch]:
             if _goal_active(goal, w):
-                goals[f"goal:{gname}"] = HARD
-        for gname, goal in st.impacts_of[ch]:
-            if _touches(goal.time, w):
-                goals[f"impact:{gname}"] = HARD
+                goals[f"goal:{gname}"] = _goal_weight(goal)
         for cname, c, members in st.couplings_of[ch]:
             if _interval_meets(c.interval, w):
                 couplings[f"coupling:{cname}"] = HARD if b.couplings == "hard" else b.stiffness

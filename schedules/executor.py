@@ -41,7 +41,7 @@ import numpy as np
 from scenarios.errors import ComposeError, InputError
 from scenegraph.footsteps import Footstep
 from scenegraph.motion import Motion
-from scenegraph.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
+from scenegraph.scene import START_WEIGHT, Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.spacetime import HandleTarget, Subproblem, _window_mask, solve
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
@@ -54,7 +54,6 @@ __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT",
 STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
 FORMAT = 1  # run-folder format
-START_WEIGHT = 100.0
 STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
 SOFT_PIN_HZ = 120.0  # soft footprint springs of full steps: planted feet still between collocation points
 WARM_IPOPT = (("mu_strategy", "monotone"), ("mu_init", 1e-4))  # full steps warm-started from full steps

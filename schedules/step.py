@@ -97,11 +97,11 @@ class Step:
                 ``duration_bounds``; only in steps whose window reaches the end)
     terms       (name, weight) pairs; names: ``energy`` (weight), ``dynamics`` (hard|relaxed),
                 ``environment`` (ground, friction cone, no penetration, feet not crossing),
-                ``start`` (start position and heading), ``boundary:start`` / ``boundary:end``
-                (pose and velocity at the window's end held at the current Scene),
-                ``goal:<name>`` (hard), ``impact:<tackle>`` (the tackle's force acts on this
-                character), ``coupling:<name>`` (a stiffness in N/m = rubber-band
-                continuation, or ``hard``)
+                ``start`` (a soft spring of this weight holding the start position),
+                ``boundary:start`` / ``boundary:end`` (pose and velocity at the window's end
+                held at the current Scene), ``goal:<name>`` (``hard`` for footprints, else the
+                weight of its soft springs: walk_to, reach, tackle, avoid),
+                ``coupling:<name>`` (a stiffness in N/m = rubber-band continuation, or ``hard``)
     cycle       1-based schedule cycle
     schedules   the schedule kinds that produced it, outermost first, e.g. (coupled, timewarp)
     role        ``whole`` | ``window`` | ``seam`` | ``horizon``

@@ -12,6 +12,7 @@ from schedules import (COUPLED, DECREASING_HORIZON, JOINT, TIME_LAYERED, TIMEWAR
                        compile_schedule)
 from schedules.cli import main
 from schedules.compiler import layer_windows
+from scenegraph.scene import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 
 FULL = Path(__file__).resolve().parent / "scenarios" / "full.yaml"
 
@@ -123,7 +124,8 @@ def test_walk_is_one_timewarp_pair_on_explicit_footprints():
     assert [st.id for st in s.order()] == ["walker/c1/whole/timing", "walker/c1/whole/full"]
     full = s.order()[-1]
     assert "footprints" not in full.free  # explicit footprints are fixed
-    assert full.goals == ("footprints_0",) and full.term("start") == "hard"
+    assert full.goals == ("footprints_0",) and full.term("goal:footprints_0") == "hard"
+    assert full.term("start") == START_WEIGHT  # the start is a soft spring (executor), not a constraint
 
 
 def test_walk_to_frees_the_footprints():
@@ -161,7 +163,7 @@ def test_time_layered_seam_runs_after_both_windows():
         # A and B of one cycle are independent
         assert not s.has_path(w0.id, w1.id) and not s.has_path(w1.id, w0.id)
         # endpoint conditions from the neighbours
-        assert w0.term("boundary:end") == "hard" and w0.term("start") == "hard"
+        assert w0.term("boundary:end") == "hard" and w0.term("start") == START_WEIGHT
         assert w1.term("boundary:start") == "hard" and w1.term("boundary:end") is None
         assert seam.term("boundary:start") == seam.term("boundary:end") == "hard"
         assert all(st.kind == "full" for st in (w0, w1, seam))
@@ -242,10 +244,11 @@ def test_decreasing_horizon_shrinks_and_planner_last_is_last():
     for st in fulls:
         assert st.role == "horizon"
         if st.characters == ("tackler",):
-            assert "hit" in st.goals
+            assert "hit" in st.goals and st.term("goal:hit") == TARGET_WEIGHT  # soft springs (scene.goal_targets)
         else:
-            assert "dodge" in st.goals and st.term("impact:hit") == "hard"
-        assert (st.term("start") == "hard") == (st.window[0] == 0.0)
+            assert "dodge" in st.goals and st.term("goal:dodge") == AVOID_WEIGHT
+            assert not any(n.startswith("impact:") for n, _ in st.terms)  # the impact force is not modelled
+        assert (st.term("start") == START_WEIGHT) == (st.window[0] == 0.0)
         assert (st.term("boundary:start") == "hard") == (st.window[0] > 0.0)
 
 
