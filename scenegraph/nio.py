@@ -528,7 +528,8 @@ class NIO:
 
     def run_bundle(self, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 3,
                    g_abs: float = 1e-3, trust: float = 0.03, min_trust: float = 1e-3, max_trust: float = 4.0,
-                   max_cuts: int = 40, max_tries: int = 4, callback: Callable[[IterationRecord], None] | None = None) -> NIOResult:
+                   max_cuts: int = 40, max_tries: int = 4, callback: Callable[[IterationRecord], None] | None = None,
+                   seeds: tuple[Motion, ...] = ()) -> NIOResult:
         """A trust-region cutting-plane (bundle) method on G + D.
 
         Every counterexample X_i ever found is a motion satisfying C, so for every θ
@@ -543,14 +544,16 @@ class NIO:
         prediction, else r halves (the halving of footnote 3) and the enriched model is
         re-solved (at most ``max_tries`` trials per iteration).  The returned g_initial and
         g_final are G at θ0 and at the result re-read with all counterexamples found.
+        ``seeds``: motions known to satisfy C (e.g. syntheses from a neutral initial motion,
+        :func:`learn_style_global`) that start the bundle as counterexamples.
         """
         t_start = _time.perf_counter()
         th = _project(np.asarray(theta0, float))
         a = np.maximum(th[:N_JOINT], 0)
         th[:N_JOINT] = a / a.sum()
         scales = _theta_scales(style_from_theta(th))
-        cur = self.evaluate(th)
-        bundle: list[Motion] = [cur.motion_S] if cur.G > 0 else []
+        cur = self.evaluate(th, tuple(seeds))
+        bundle: list[Motion] = list(seeds) + ([cur.motion_S] if cur.G > 0 else [])
         n_eval = 1
         hist = [IterationRecord(0, cur.G, cur.D, cur.E_T, cur.E_S, 0.0, 1, _time.perf_counter() - t_start)]
         if callback:

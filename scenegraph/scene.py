@@ -28,7 +28,7 @@ import numpy as np
 from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachGoal, Scenario, StyleChangeGoal,
                               TackleGoal, WalkToGoal, joint_dofs)
 
-from .body import Character, make_character
+from .body import PRESETS, Character, make_character
 from .footsteps import RUN_BALL, WALK_BALL, WALK_HEEL, Footstep
 from .gait import initial_motion
 from .ground import FLAT, Ground, ground_from_environment
@@ -48,7 +48,7 @@ TARGET_WEIGHT = 300.0   # soft goal springs (1/m² of the normalised objective)
 TACKLE_CONTACT_TOL = 0.05  # m: the tackler's chest front within this of the target's torso surface
 TACKLE_SPEED_TOL = 0.10    # relative: closing speed within ±10 % of the goal speed
 TACKLE_SPEED_LEAD = 0.1    # s: the speed is asked for as a chest position this long before the impact
-AVOID_MARGIN = 0.08        # m: the escape target lies this far outside the avoided sphere
+AVOID_MARGIN = 0.25        # m: the escape target lies this far outside the avoided sphere
 REACH_ACCEL = 1.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
 #                            time from the start of the optimised window to the goal (reaction time)
 START_WEIGHT = 100.0       # soft spring holding the pelvis at the character's start position (same units)
@@ -174,10 +174,25 @@ def _style(scn: Scenario, ref: str, ch: Character, shoe_scale: float) -> tuple[S
     if f is None:
         st, where = default_style(ch.total_mass), "built-in"
     else:
-        st, where = load_style(f), str(f)
+        st, where = scale_style_to_body(load_style(f), ch), str(f)
     if shoe_scale != 1.0:
         st = st.with_(k_shoe=float(st.k_shoe) * shoe_scale)
     return st, where
+
+
+def scale_style_to_body(style: Style, ch: Character) -> Style:
+    """A learned style on another body: the passive springs, their damping and the shoe spring
+    (N·m/rad, N·m·s/rad, N/m) scale with the body mass ``ch.mass`` (kg, without carried
+    loads) over the mass of the body it was learned on (``provenance.body``), as the default
+    style's do; α, q̄ and h̄ carry over.  A style without a known learning body is unchanged."""
+    body = style.provenance.body if style.provenance is not None else None
+    if body is None or body not in PRESETS:
+        return style
+    r = float(ch.mass) / float(PRESETS[body].mass)
+    if abs(r - 1.0) < 1e-12:
+        return style
+    return style.with_(ks1=np.asarray(style.ks1) * r, ks2=np.asarray(style.ks2) * r, kd=np.asarray(style.kd) * r,
+                       k_shoe=float(style.k_shoe) * r)
 
 
 # --- footsteps -------------------------------------------------------------------------------

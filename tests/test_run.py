@@ -76,7 +76,7 @@ def test_walk_end_to_end(walk_run):
     assert rep["scenario"] == "walk"
     assert [s["id"] for s in rep["steps"]] == ["walker/c1/whole/timing", "walker/c1/whole/full"]
     for s in rep["steps"]:
-        assert s["success"] and s["iterations"] > 0 and s["seconds"] > 0 and np.isfinite(s["energy"])
+        assert _accepted(s) and s["iterations"] > 0 and s["seconds"] > 0 and np.isfinite(s["energy"])
     audit = rep["characters"]["walker"]["audit"]
     for k in ("root_residual_rms", "footstep_error_max", "penetration_max", "friction_violation_max",
               "foot_sliding_max", "joint_limit_violation_max", "energy"):
@@ -88,6 +88,16 @@ def test_walk_end_to_end(walk_run):
     # the stage carries provenance
     text = stage.read_text()
     assert "walker" in text and "energies" in text
+
+
+def _accepted(step: dict) -> bool:
+    """The executor's policy, read from the report: a full step succeeds or is kept at its
+    iteration cap with every hard constraint held; a timing step (a warm start) succeeds or is
+    reported as discarded."""
+    if step["kind"] == "full":
+        return step["success"] or (step["status"] == "Maximum_Iterations_Exceeded"
+                                   and all(v <= 1e-3 for v in step["violations"].values()))
+    return step["success"] or step["status"].startswith("discarded:")
 
 
 def test_bad_scenario_exits_2_and_writes_nothing(tmp_path):
@@ -164,13 +174,7 @@ def test_bundled_scenarios_run_end_to_end(name, tmp_path):
     dp, dr, n = readback_errors(tmp_path / f"{name}.usda", tracks_from_run(name, tmp_path / "run", 30.0), 30.0)
     assert n > 0 and dp <= 1e-5 and dr <= 1e-4
     rep = json.loads((tmp_path / "r.json").read_text())
-    # every full step succeeds or is kept at its cap with every hard constraint held; a timing
-    # step is a warm start, discarded when it did not converge
-    assert all(s["success"] or (s["status"] == "Maximum_Iterations_Exceeded" and
-                                all(v <= 1e-3 for v in s["violations"].values()))
-               for s in rep["steps"] if s["kind"] == "full")
-    assert all(s["success"] or s["status"].startswith("discarded:") or s["kind"] == "full"
-               for s in rep["steps"])
+    assert all(_accepted(s) for s in rep["steps"])
     for who, c in rep["characters"].items():
         assert c["audit"]["root_residual_rel"] < 0.05, who
         assert c["audit"]["passes"], (who, c["audit"])

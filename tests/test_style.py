@@ -146,3 +146,25 @@ def test_style_is_immutable():
     with pytest.raises(Exception):
         s.k_shoe = 3.0
     assert set(PER_DOF_FIELDS) <= set(Style.model_fields)
+
+
+def test_learned_style_scales_its_springs_to_the_body_it_is_used_on():
+    """A style learned on adult_male (73 kg) used on the child preset (23 kg): springs, damping and
+    shoe scale by 23/73, as the default style's do; α, q̄ and h̄ carry over; same body: unchanged."""
+    from scenegraph.body import make_character
+    from scenegraph.scene import scale_style_to_body
+    from scenegraph.style import Provenance
+
+    learned = default_style(73.0).with_(name="w", q_rest=np.full(N_JOINT, 0.1),
+                                        provenance=Provenance(clip="c.bvh", body="adult_male"))
+    child = make_character("child")
+    s = scale_style_to_body(learned, child)
+    r = child.mass / 73.0
+    assert r == pytest.approx(23.0 / 73.0)
+    for f in ("ks1", "ks2", "kd"):
+        assert np.allclose(getattr(s, f), r * getattr(learned, f))
+    assert s.k_shoe == pytest.approx(r * learned.k_shoe)
+    assert np.array_equal(s.alpha, learned.alpha) and np.array_equal(s.q_rest, learned.q_rest)
+    assert s.h_rest == learned.h_rest and s.provenance == learned.provenance
+    assert scale_style_to_body(learned, make_character("adult_male")) is learned
+    assert scale_style_to_body(learned.with_(provenance=None), child).k_shoe == learned.k_shoe  # body unknown
