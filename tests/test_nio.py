@@ -128,6 +128,28 @@ def test_local_counterexample_lowers_energy_within_C():
     assert ev.G > 0 and np.all(np.isfinite(ev.grad))
 
 
+def test_seeded_counterexamples_enter_g():
+    """``run_bundle(seeds=…)``: a known motion within C below E(X_T) (here two Gauss–Newton steps
+    from X_T, lower than the one step local NIO takes) is a counterexample from the start: the
+    reported G(θ0) is at least E(X_T) − E(seed), and larger than without the seed."""
+    from scenegraph.synthesis import presolve_kinematics
+    ch = make_character("adult_male")
+    fs = footsteps_for_walk(n_steps=3)
+    d = default_style(ch.total_mass)
+    m = presolve_kinematics(ch, d, initial_motion(ch, fs, 0.0, 1.3), fs).motion
+    nio = NIO(ch, m, fs, local=True)
+    th = d.vector()
+    ET, _, _, lam = nio.measure(th, m)
+    X1, _ = nio.local_counterexample(th, m, lam)
+    X2, viol = nio.local_counterexample(th, X1, nio.measure(th, X1)[3])
+    assert viol <= nio.feas_tol
+    E2 = nio.measure(th, X2)[0]
+    plain = nio.run_bundle(th, max_iter=0)
+    seeded = nio.run_bundle(th, max_iter=0, seeds=(X2,))
+    assert seeded.g_initial >= ET - E2 - 1e-9 * abs(ET)
+    assert seeded.g_initial > plain.g_initial
+
+
 def test_shipped_styles_have_provenance():
     """Every style in scenarios/styles/ was learned: provenance names a shipped clip (never an
     _iclone one), frames, body, versions, final G and the measured re-synthesis."""
