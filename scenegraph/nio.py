@@ -544,8 +544,8 @@ class NIO:
         prediction, else r halves (the halving of footnote 3) and the enriched model is
         re-solved (at most ``max_tries`` trials per iteration).  The returned g_initial and
         g_final are G at θ0 and at the result re-read with all counterexamples found.
-        ``seeds``: motions known to satisfy C (e.g. syntheses from a neutral initial motion,
-        :func:`learn_style_global`) that start the bundle as counterexamples.
+        ``seeds``: motions known to satisfy C (e.g. syntheses from a neutral initial motion
+        under θ0) that start the bundle as counterexamples.
         """
         t_start = _time.perf_counter()
         th = _project(np.asarray(theta0, float))

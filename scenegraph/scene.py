@@ -39,7 +39,8 @@ from .style import Style, default_style, load_style
 
 __all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets",
            "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH",
-           "adversarial_plans_last", "tackle_measure", "TARGET_WEIGHT", "AVOID_WEIGHT", "START_WEIGHT", "avoid_measure", "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL"]
+           "adversarial_plans_last", "tackle_measure", "avoid_measure", "scale_style_to_body",
+           "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL", "TARGET_WEIGHT", "AVOID_WEIGHT", "START_WEIGHT"]
 
 CADENCE = 1.85          # steps per second of generated walks
 STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
@@ -48,7 +49,8 @@ TARGET_WEIGHT = 300.0   # soft goal springs (1/m² of the normalised objective)
 TACKLE_CONTACT_TOL = 0.05  # m: the tackler's chest front within this of the target's torso surface
 TACKLE_SPEED_TOL = 0.10    # relative: closing speed within ±10 % of the goal speed
 TACKLE_SPEED_LEAD = 0.1    # s: the speed is asked for as a chest position this long before the impact
-AVOID_MARGIN = 0.25        # m: the escape target lies this far outside the avoided sphere
+AVOID_MARGIN = 0.25        # m: the escape target lies this far outside the avoided sphere (0.08 left
+#                            tackle_dodge's learned-style target 0.34-0.45 m from a `run` tackler)
 REACH_ACCEL = 1.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
 #                            time from the start of the optimised window to the goal (reaction time)
 START_WEIGHT = 100.0       # soft spring holding the pelvis at the character's start position (same units)

@@ -110,16 +110,21 @@ def test_flight_phase_detection():
     assert _has_flight(run, run[0].t0, run[-1].t1)
 
 
-def test_local_counterexample_lowers_energy_within_C():
-    """The Gauss–Newton counterexample (local NIO) of a motion that satisfies C: lower energy,
-    C kept to feas_tol, and G(θ) = E(X_T) − E(X_S) ≥ 0 with a finite Eq. 21 gradient."""
+@pytest.fixture(scope="module")
+def local_nio():
+    """(X_T: a kinematically pre-solved walk that satisfies C, local NIO on it, θ: the default style)."""
     from scenegraph.synthesis import presolve_kinematics
     ch = make_character("adult_male")
     fs = footsteps_for_walk(n_steps=3)
     d = default_style(ch.total_mass)
     m = presolve_kinematics(ch, d, initial_motion(ch, fs, 0.0, 1.3), fs).motion
-    nio = NIO(ch, m, fs, local=True)
-    th = d.vector()
+    return m, NIO(ch, m, fs, local=True), d.vector()
+
+
+def test_local_counterexample_lowers_energy_within_C(local_nio):
+    """The Gauss–Newton counterexample (local NIO) of a motion that satisfies C: lower energy,
+    C kept to feas_tol, and G(θ) = E(X_T) − E(X_S) ≥ 0 with a finite Eq. 21 gradient."""
+    m, nio, th = local_nio
     E, _, _, lam = nio.measure(th, m)
     XS, viol = nio.local_counterexample(th, m, lam)
     assert viol <= nio.feas_tol
@@ -128,17 +133,11 @@ def test_local_counterexample_lowers_energy_within_C():
     assert ev.G > 0 and np.all(np.isfinite(ev.grad))
 
 
-def test_seeded_counterexamples_enter_g():
+def test_seeded_counterexamples_enter_g(local_nio):
     """``run_bundle(seeds=…)``: a known motion within C below E(X_T) (here two Gauss–Newton steps
     from X_T, lower than the one step local NIO takes) is a counterexample from the start: the
     reported G(θ0) is at least E(X_T) − E(seed), and larger than without the seed."""
-    from scenegraph.synthesis import presolve_kinematics
-    ch = make_character("adult_male")
-    fs = footsteps_for_walk(n_steps=3)
-    d = default_style(ch.total_mass)
-    m = presolve_kinematics(ch, d, initial_motion(ch, fs, 0.0, 1.3), fs).motion
-    nio = NIO(ch, m, fs, local=True)
-    th = d.vector()
+    m, nio, th = local_nio
     ET, _, _, lam = nio.measure(th, m)
     X1, _ = nio.local_counterexample(th, m, lam)
     X2, viol = nio.local_counterexample(th, X1, nio.measure(th, X1)[3])

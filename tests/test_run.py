@@ -94,9 +94,10 @@ def _accepted(step: dict) -> bool:
     """The executor's policy, read from the report: a full step succeeds or is kept at its
     iteration cap with every hard constraint held; a timing step (a warm start) succeeds or is
     reported as discarded."""
+    from schedules.executor import VIOLATION_TOL
     if step["kind"] == "full":
         return step["success"] or (step["status"] == "Maximum_Iterations_Exceeded"
-                                   and all(v <= 1e-3 for v in step["violations"].values()))
+                                   and all(v <= VIOLATION_TOL for v in step["violations"].values()))
     return step["success"] or step["status"].startswith("discarded:")
 
 
