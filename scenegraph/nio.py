@@ -218,8 +218,9 @@ class NIO:
                  solve_iter: int = 80, collocation_hz: float = 30.0, tol: float = 1e-4,
                  ipopt_options: tuple = WARM_START, feas_tol: float = 1e-3, rounds: int = 1,
                  cyclic: bool = False, soft_pin_hz: float = 0.0, local: bool = False,
-                 hessian: str = "gauss_newton"):
+                 hessian: str = "gauss_newton", alpha_floor: float = 0.0):
         self.ch, self.target, self.footsteps = ch, target, tuple(footsteps)
+        self.alpha_floor = alpha_floor  # lower bound of every α_j in the bundle's LP
         self.local = local  # counterexamples by one Gauss–Newton step from X_T (local_counterexample)
         self.verbose = False
         self.rounds = rounds  # a counterexample = `rounds` solves of solve_iter iterations, each
@@ -497,6 +498,7 @@ class NIO:
         lo = np.full(n, -np.inf)
         hi = np.full(n, np.inf)
         lo[:4 * M] = 0.0
+        lo[:M] = self.alpha_floor
         hi[M:4 * M] = 1e5
         lo[4 * M:5 * M], hi[4 * M:5 * M] = -np.pi, np.pi
         lo[-2], hi[-2] = 0.0, 1e7
@@ -772,10 +774,11 @@ def _versions() -> dict[str, str]:
 def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], *, init: Style | str = "paper",
                 name: str = "learned", clip: str | None = None, frames: str | None = None,
                 body: str | None = None, callback=None, solve_iter: int = 100, cyclic: bool = False,
-                local: bool = True, hessian: str = "gauss_newton", **run_kw) -> NIOResult:
+                local: bool = True, hessian: str = "gauss_newton", alpha_floor: float = 0.0, **run_kw) -> NIOResult:
     """Learn a style from ``target``.  ``init``: "paper" (α = 1/M, q̄ = mean pose, springs by
     Eq. 22) or a Style to start from.  The returned style carries its provenance."""
-    nio = NIO(ch, target, footsteps, solve_iter=solve_iter, cyclic=cyclic, local=local, hessian=hessian)
+    nio = NIO(ch, target, footsteps, solve_iter=solve_iter, cyclic=cyclic, local=local, hessian=hessian,
+              alpha_floor=alpha_floor)
     th0 = nio.initial_theta() if isinstance(init, str) else init.vector().copy()
     if local:  # cheap iterations (~1 s): a stricter relative-decrease stop
         run_kw.setdefault("rtol", 0.005)

@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from schedules.cli_learn import clip_target, parse_frames, save_learned  # noqa: E402
+from scenegraph.body import N_JOINT  # noqa: E402
 from scenegraph.nio import joint_rms_deg, learn_style  # noqa: E402
 from scenegraph.style import default_style  # noqa: E402
 
@@ -47,6 +48,7 @@ def main() -> None:
     ap.add_argument("--counterexamples", default="local", choices=("local", "ipopt"),
                     help="local: one Gauss-Newton step from X_T (default); ipopt: spacetime solves (NIO local=False)")
     ap.add_argument("--solve-iter", type=int, default=150, help="IPOPT iterations per ipopt counterexample")
+    ap.add_argument("--alpha-floor", type=float, default=0.0, help="lower bound of every alpha_j in units of 1/M (NIO.alpha_floor; an experiment, README)")
     args = ap.parse_args()
     frames = parse_frames(args.frames)
 
@@ -61,7 +63,8 @@ def main() -> None:
     res = learn_style(ch, XT, steps, name=Path(args.out).stem if args.out else "walk", clip=Path(args.clip).name,
                       frames=args.frames,
                       body="adult_male", callback=progress, max_iter=args.max_iter, hessian=args.hessian,
-                      local=args.counterexamples == "local", solve_iter=args.solve_iter)
+                      local=args.counterexamples == "local", solve_iter=args.solve_iter,
+                      alpha_floor=args.alpha_floor / N_JOINT)
     nio_s = time.perf_counter() - t
     print(f"stop: {res.stop_reason}; evaluations {res.evaluations}", flush=True)
 
