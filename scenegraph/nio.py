@@ -787,7 +787,9 @@ def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], 
     prov = Provenance(clip=clip, frames=frames, body=body or ch.preset, versions=_versions(), g_final=float(out.g_final),
                       g_initial=float(out.g_initial), iterations=out.iterations, stop=out.stop_reason,
                       counterexamples="local (one Gauss-Newton step from X_T)" if local else
-                      f"spacetime solves of {solve_iter} IPOPT iterations")
+                      f"spacetime solves of {solve_iter} IPOPT iterations",
+                      **({"hessian": hessian} if hessian != "gauss_newton" else {}),
+                      **({"alpha_floor": float(alpha_floor)} if alpha_floor > 0 else {}))
     out.style = style_from_theta(out.theta, name=name, provenance=prov)
     out.nio = nio  # type: ignore[attr-defined]
     return out

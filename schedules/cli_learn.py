@@ -160,7 +160,21 @@ def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, r
         prov["resynth_warm_rms_deg"] = dict(resynth_warm)
     style = res.style.model_copy(update={"provenance": Provenance(**prov)})
     save_style(style, out, header=f"# learned by: compose learn {clip_name} --frames {frames[0]}:{frames[1]} "
-                                  f"--body {body} -o {Path(out).name}\n")
+                                  f"--body {body}{_option_flags(prov)} -o {Path(out).name}\n")
+
+
+def _option_flags(prov: dict) -> str:
+    """The non-default `compose learn` options a provenance records, as command-line flags."""
+    from scenegraph.body import N_JOINT
+
+    flags = ""
+    if str(prov.get("counterexamples", "")).startswith("spacetime"):
+        flags += " --counterexamples ipopt"
+    if prov.get("hessian"):
+        flags += f" --hessian {prov['hessian']}"
+    if prov.get("alpha_floor"):
+        flags += f" --alpha-floor {prov['alpha_floor'] * N_JOINT:g}"
+    return flags
 
 
 def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=None, name=None,
@@ -176,7 +190,11 @@ def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=
 
 
 def _cmd_learn(args) -> int:
+    from scenegraph.body import N_JOINT
+
     frames = parse_frames(args.frames)
+    if not 0.0 <= args.alpha_floor <= 1.0:
+        raise InputError(f"--alpha-floor {args.alpha_floor}: must lie in [0, 1] (units of 1/M; Σα = 1)")
     t0 = time.perf_counter()
 
     def progress(rec):
@@ -187,7 +205,8 @@ def _cmd_learn(args) -> int:
     print(f"compose learn: {args.clip} frames {args.frames} body {args.body}", file=sys.stderr, flush=True)
     try:
         res, _ = learn_from_bvh(args.clip, frames, args.body, args.output, progress=progress,
-                                max_iter=args.max_iter)
+                                max_iter=args.max_iter, local=args.counterexamples == "local",
+                                hessian=args.hessian, alpha_floor=args.alpha_floor / N_JOINT)
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -206,4 +225,10 @@ def register(sub) -> None:
     p.add_argument("--body", default="adult_male", metavar="PRESET", help="body preset (default adult_male)")
     p.add_argument("-o", "--output", required=True, metavar="STYLE.yaml")
     p.add_argument("--max-iter", type=int, default=200, help="safety limit on NIO iterations (default 200)")
+    p.add_argument("--counterexamples", choices=("local", "ipopt"), default="local",
+                   help="local: one Gauss-Newton step from X_T (default); ipopt: spacetime solves")
+    p.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
+                   help="Hessian of the IPOPT counterexample solves (default gauss_newton)")
+    p.add_argument("--alpha-floor", type=float, default=0.0, metavar="F",
+                   help="every muscle weight alpha_j >= F/M (default 0: a muscle may cost nothing)")
     p.set_defaults(func=_cmd_learn)

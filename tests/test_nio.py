@@ -102,15 +102,35 @@ def test_joint_rms_zero_for_same_motion(small):
     assert joint_rms_deg(m, m) == 0.0
 
 
-def test_cli_learn_bad_input(tmp_path):
+def test_cli_learn_bad_input(tmp_path, capsys):
     from schedules.cli import main
     out = tmp_path / "s.yaml"
     assert main(["learn", "nope.bvh", "--frames", "1:60", "-o", str(out)]) == 2
     assert main(["learn", "nope.bvh", "--frames", "60", "-o", str(out)]) == 2
+    capsys.readouterr()
+    assert main(["learn", "nope.bvh", "--frames", "1:60", "--alpha-floor", "2", "-o", str(out)]) == 2
+    assert "--alpha-floor 2.0: must lie in [0, 1]" in capsys.readouterr().err
     bad = tmp_path / "bad.bvh"
     bad.write_text("HIERARCHY\nROOT Hips\n{\n")
     assert main(["learn", str(bad), "--frames", "1:60", "-o", str(out)]) == 2
     assert not out.exists()
+
+
+def test_learned_header_repeats_non_default_options():
+    """A style file's "learned by" line must re-learn it: non-default NIO options become flags
+    that `compose learn` accepts."""
+    import argparse
+
+    from schedules.cli_learn import _option_flags, register
+    prov = {"counterexamples": "spacetime solves of 150 IPOPT iterations", "hessian": "exact",
+            "alpha_floor": 0.6 / N_JOINT}
+    flags = _option_flags(prov)
+    assert flags == " --counterexamples ipopt --hessian exact --alpha-floor 0.6"
+    assert _option_flags({"counterexamples": "local (one Gauss-Newton step from X_T)"}) == ""
+    ap = argparse.ArgumentParser()
+    register(ap.add_subparsers())
+    a = ap.parse_args(["learn", "c.bvh", "--frames", "1:9", "-o", "s.yaml", *flags.split()])
+    assert (a.counterexamples, a.hessian, a.alpha_floor) == ("ipopt", "exact", 0.6)
 
 
 def test_resample_keeps_the_motion(small):
