@@ -72,6 +72,7 @@ from .spacetime import (FORCE_HANDLES, OBJ_SCALE, W_ROOT, Built, IterationCallba
 from .style import Provenance, Style, default_style
 
 __all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style", "joint_rms_deg",
+           "resynthesize_from_example",
            "D_WEIGHT", "N_THETA_FULL"]
 
 D_WEIGHT = 1.0e4  # paper: w in Eq. 18
@@ -832,3 +833,18 @@ def feasible_target(ch: Character, motion: Motion, footsteps: tuple[Footstep, ..
     p = np.concatenate([b.p[:nK], np.zeros(N_JOINT * N)])  # sqrt(α) = 0: no muscle energy
     return solve(sp, replace(b, p=p))
 
+
+
+def resynthesize_from_example(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], style: Style, *,
+                              max_iter: int = 300, hessian: str = "gauss_newton", fps: float = 60.0) -> Result:
+    """The paper's re-synthesis check (§7, "Estimating style parameters"), with the paper's
+    initialisation: for each time the joint angles of the pose of the example ``target`` (X_T)
+    with the most similar footstep constraints (leg phases; ``gait.initial_motion(example=…)``),
+    the root from the footprints; then the ordinary synthesis (kinematic pre-solve, spacetime
+    solve of ``max_iter`` iterations) with ``style`` and the same ``footsteps``.  For X_T's own
+    footprints the initial motion is X_T up to its root (07_01: 0.45° joint RMS)."""
+    from .synthesis import synthesize
+
+    t, q = target.sample(fps)
+    return synthesize(ch, style, tuple(footsteps), target.start, target.end, example=(t, q, tuple(footsteps)),
+                      max_iter=max_iter, hessian=hessian).result

@@ -149,7 +149,7 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
 
 
 def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, resynth: dict | None = None,
-                 resynth_warm: dict | None = None) -> None:
+                 resynth_warm: dict | None = None, resynth_example: dict | None = None) -> None:
     """Write a learned style with its provenance (and, when measured, the re-synthesis RMS)."""
     from scenegraph.style import Provenance, save_style
 
@@ -158,6 +158,8 @@ def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, r
         prov["resynth_rms_deg"] = dict(resynth)
     if resynth_warm:
         prov["resynth_warm_rms_deg"] = dict(resynth_warm)
+    if resynth_example:  # nio.resynthesize_from_example: the paper's initial motion
+        prov["resynth_example_rms_deg"] = dict(resynth_example)
     style = res.style.model_copy(update={"provenance": Provenance(**prov)})
     save_style(style, out, header=f"# learned by: compose learn {clip_name} --frames {frames[0]}:{frames[1]} "
                                   f"--body {body}{_option_flags(prov)} -o {Path(out).name}\n")
