@@ -277,6 +277,10 @@ def test_synthetic_recovery():
     - ``hessian="exact"`` with IPOPT counterexamples (``synthetic_recovery("exact", local=False,
       max_iter=40)``, 36 iterations, 2170 s loaded): G 4.76e-2 → 4.16e-3 (11×; G(θ*) 1.33e-2);
       re-synthesis 2.50° (default 2.90°); α not recovered (0.81).
+    - 2026-12-01, X_T refined with the exact Hessian (3000 iterations, tol 1e-9, still not
+      converged), local counterexamples: G 8.2e-4 → 2.0e-5 (41×; G(θ*) 6.8e-5); exact
+      re-synthesis from X_T, warm-started: learned 1.75°, θ* itself 1.43°, default 0.26°
+      (README, "Synthetic check of the measure itself"): the test's second half fails for θ*.
     An earlier solver version gave 54× and 22.5° (default 8.6°).  Why: the energy is
     multi-modal and flat (IPOPT's inertia correction shrinks the steps along the flat
     directions in both Hessian modes, README "Exact Hessian"), so which minimum the pipeline
