@@ -261,6 +261,10 @@ class CharacterSpec(_Model):
     style: str = Field("default", min_length=1, max_length=512,
                        description="bundled style name, or a style file path relative to the scenario file")
     start: StartSpec = Field(default_factory=StartSpec, description="start position and heading")
+    initial_motion: Literal["generator", "example"] = Field(
+        "generator", description="joint angles of the initial guess: 'generator' (built-in gait curves) or "
+                                 "'example' (the poses of the clip the style was learned from, by leg phase, as "
+                                 "the paper initialises; needs a learned style and no style change)")
 
 
 # --- goals ----------------------------------------------------------------------------------

@@ -9,13 +9,15 @@
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .body import N_DOF, N_ROOT, Character, standing_pose
 from .footsteps import Footstep
 from .motion import Motion
 
-__all__ = ["initial_motion", "leg_phase", "example_gait_pose"]
+__all__ = ["initial_motion", "leg_phase", "example_gait_pose", "phase_code", "example_poses"]
 
 D = np.deg2rad
 ROOT_HEIGHT = 0.95  # initial pelvis height as a fraction of the standing height
@@ -96,8 +98,9 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
                    example=None, ground=None) -> Motion:
     """An initial motion over [t0, t1] (s) for the given footsteps.
 
-    ``example``: an optional (times, q (T, 35), footsteps) example motion whose poses are
-    matched by leg phase; without it the built-in example gait is used.
+    ``example``: optional example poses matched by leg phase, either (codes (T, 2), joint
+    angles (T, 29)) as :func:`example_poses` returns them, or an example motion (times,
+    q (T, 35), footsteps); without it the built-in example gait is used.
     ``run``: True for running poses throughout, or the world time (s) of a walk → run change
     (poses blended over RUN_BLEND around it).
     ``ground`` (a :class:`~scenegraph.ground.Ground`): the pelvis height follows the ground
@@ -109,8 +112,9 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
     q = np.zeros((len(times), N_DOF))
     ex_phases = None
     if example is not None:
-        ex_t, ex_q, ex_steps = example
-        ex_phases = np.array([[_phase_code(leg_phase(ex_steps, f, t)) for f in ("l", "r")] for t in ex_t])
+        if len(example) == 3:  # an example motion
+            example = example_poses(example[2], example[0], example[1][:, N_ROOT:])
+        ex_phases, ex_joints = (np.asarray(a, float) for a in example)
     for i, t in enumerate(times):
         ph_l, ph_r = leg_phase(footsteps, "l", t), leg_phase(footsteps, "r", t)
         if isinstance(run, bool):
@@ -122,9 +126,9 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
             q[i] = ((1 - w_run) * example_gait_pose(ch, ph_l, ph_r, False)
                     + w_run * example_gait_pose(ch, ph_l, ph_r, True))
         else:
-            code = np.array([_phase_code(ph_l), _phase_code(ph_r)])
+            code = np.array([phase_code(ph_l), phase_code(ph_r)])
             j = int(np.argmin(np.sum(_phase_dist(ex_phases, code), axis=1)))
-            q[i] = ex_q[j]
+            q[i, N_ROOT:] = ex_joints[j]
         q[i, 0:2] = xy[i]
         q[i, 3] = heading[i]
         q[i, 2] = stand[2] * (ROOT_HEIGHT - 0.02 * w_run)
@@ -136,7 +140,23 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
     return Motion.from_samples(times, q, max(6, int(round((t1 - t0) * ctrl_per_second)) + 3))
 
 
-def _phase_code(ph: tuple[str, float]) -> float:
+def example_poses(footsteps: tuple[Footstep, ...], times, joints) -> tuple[np.ndarray, np.ndarray]:
+    """(codes (T, 2), joint angles (T, 29)): an example motion's poses (``joints`` at world
+    ``times``, s) keyed by the phase codes of its left and right leg under ``footsteps``.
+    A stance cut short by the start or end of the example (under 80 % of the longest) is
+    first extended to the longest, so its phase counts from the real heel strike / to the
+    real toe-off (07_01's last 0.07 s of a stance would otherwise read as a whole stance)."""
+    times = np.asarray(times, float)
+    lo, hi = times[0] + 1e-6, times[-1] - 1e-6
+    d = max((f.t1 - f.t0 for f in footsteps), default=0.0)
+    footsteps = tuple(f if f.t1 - f.t0 >= 0.8 * d else
+                      replace(f, t0=f.t1 - d) if f.t0 <= lo else
+                      replace(f, t1=f.t0 + d) if f.t1 >= hi else f for f in footsteps)
+    codes = np.array([[phase_code(leg_phase(footsteps, f, t)) for f in ("l", "r")] for t in times])
+    return codes, np.asarray(joints, float)
+
+
+def phase_code(ph: tuple[str, float]) -> float:
     """Map a leg phase onto one cycle coordinate in [0, 2): stance [0, 1), swing [1, 2)."""
     kind, u = ph
     return u if kind == "stance" else 1.0 + u

@@ -69,10 +69,10 @@ from .footsteps import Footstep
 from .motion import Motion
 from .spacetime import (FORCE_HANDLES, OBJ_SCALE, W_ROOT, Built, IterationCallback, Result, Subproblem,
                         build, residual_kernel, solve, violations)
-from .style import Provenance, Style, default_style
+from .style import ExamplePoses, Provenance, Style, default_style
 
 __all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style", "joint_rms_deg",
-           "resynthesize_from_example",
+           "resynthesize_from_example", "example_of",
            "D_WEIGHT", "N_THETA_FULL"]
 
 D_WEIGHT = 1.0e4  # paper: w in Eq. 18
@@ -791,7 +791,8 @@ def learn_style(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], 
                       f"spacetime solves of {solve_iter} IPOPT iterations",
                       **({"hessian": hessian} if hessian != "gauss_newton" else {}),
                       **({"alpha_floor": float(alpha_floor)} if alpha_floor > 0 else {}))
-    out.style = style_from_theta(out.theta, name=name, provenance=prov)
+    out.style = style_from_theta(out.theta, name=name, provenance=prov).with_(
+        example=example_of(target, footsteps))
     out.nio = nio  # type: ignore[attr-defined]
     return out
 
@@ -833,6 +834,15 @@ def feasible_target(ch: Character, motion: Motion, footsteps: tuple[Footstep, ..
     p = np.concatenate([b.p[:nK], np.zeros(N_JOINT * N)])  # sqrt(α) = 0: no muscle energy
     return solve(sp, replace(b, p=p))
 
+
+
+def example_of(target: Motion, footsteps: tuple[Footstep, ...], fps: float = 30.0) -> ExamplePoses:
+    """The example poses a learned style carries: X_T's joint angles at ``fps`` keyed by leg
+    phase under its footsteps (the paper's initial motions for new footsteps, §7)."""
+    from .gait import example_poses
+
+    t, q = target.sample(fps)
+    return ExamplePoses.from_arrays(*example_poses(tuple(footsteps), t, q[:, N_ROOT:]))
 
 
 def resynthesize_from_example(ch: Character, target: Motion, footsteps: tuple[Footstep, ...], style: Style, *,

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenarios.errors import InputError
 from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachGoal, Scenario, StyleChangeGoal,
                               TackleGoal, WalkToGoal, joint_dofs)
 
@@ -195,6 +196,21 @@ def scale_style_to_body(style: Style, ch: Character) -> Style:
         return style
     return style.with_(ks1=np.asarray(style.ks1) * r, ks2=np.asarray(style.ks2) * r, kd=np.asarray(style.kd) * r,
                        k_shoe=float(style.k_shoe) * r)
+
+
+def _example(scn: Scenario, spec, styles: list[tuple[str, Style]]):
+    """The example poses of a character's initial motion (``initial_motion: example``), or None."""
+    if spec.initial_motion != "example":
+        return None
+    i = scn.character_names.index(spec.name)
+    ref, st = styles[0]
+    why = ("it changes style" if len(scn.style_timeline(spec.name)) > 1 else
+           f"style {ref!r} carries no example poses (styles learned by compose learn do)" if st.example is None
+           else None)
+    if why:
+        raise InputError(f"initial_motion: example needs one learned style, but {why}",
+                         scn.location(("characters", i, "initial_motion")))
+    return st.example.arrays()
 
 
 # --- footsteps -------------------------------------------------------------------------------
@@ -467,7 +483,8 @@ def build_scene(scn: Scenario) -> Scene:
             steps = list(standing_footsteps(start, 0.0, T, fl))
         steps.sort(key=lambda f: (f.t0, f.foot))
         run_from = change[0] if change is not None and change[2] == "run" else runner
-        motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground, run=run_from)
+        motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground, run=run_from,
+                                example=_example(scn, spec, styles))
         chars.append(CharacterState(spec.name, ch, tuple(styles), tuple(steps), motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     return Scene(scn.name, T, tuple(chars), tuple(goals), tuple(couplings),

@@ -11,6 +11,10 @@ A style has 29·5 + 2 = 147 numbers:
 
 Per-DOF fields are written in files as a mapping from joint DOF name to value (readable,
 order-free), and held in memory as numpy arrays in ``JOINT_DOF_NAMES`` order.
+
+A learned style may also carry ``example``: the poses of the motion it was learned from (X_T),
+indexed by the gait phase of each leg, from which a synthesis can take its initial motion as
+the paper does (§7; ``gait.initial_motion(example=…)``).  It is not part of θ.
 """
 from __future__ import annotations
 
@@ -18,13 +22,13 @@ import os
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from scenarios.yamlio import dump_yaml_atomic, load_model
 
 from .body import JOINT_DOF_NAMES, N_JOINT
 
-__all__ = ["Style", "default_style", "load_style", "save_style", "PER_DOF_FIELDS"]
+__all__ = ["Style", "ExamplePoses", "default_style", "load_style", "save_style", "PER_DOF_FIELDS"]
 
 PER_DOF_FIELDS = ("alpha", "ks1", "ks2", "kd", "q_rest")
 ALPHA_SUM_TOL = 1e-3  # hand-written files round; files written by save_style sum to 1 within 1e-7
@@ -41,6 +45,54 @@ class Provenance(BaseModel):
     g_final: float | None = None
 
 
+class ExamplePoses(BaseModel):
+    """Poses of a style's example motion by leg phase.  Sample i has the phase codes
+    ``phase_l[i]``, ``phase_r[i]`` (stance [0, 1), swing [1, 2): ``gait.phase_code``) and the
+    joint angles ``joints[dof][i]`` (rad)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    phase_l: list[float] = Field(min_length=2, max_length=10000)
+    phase_r: list[float] = Field(min_length=2, max_length=10000)
+    joints: dict[str, list[float]]
+
+    @field_validator("phase_l", "phase_r")
+    @classmethod
+    def _codes(cls, v):
+        if not all(np.isfinite(x) and 0.0 <= x <= 2.0 for x in v):
+            raise ValueError("phase codes must lie in [0, 2]")
+        return v
+
+    @field_validator("joints")
+    @classmethod
+    def _dofs(cls, v):
+        unknown = sorted(set(v) - set(JOINT_DOF_NAMES))
+        if unknown:
+            raise ValueError(f"unknown joint DOF {unknown[0]!r}")
+        missing = [d for d in JOINT_DOF_NAMES if d not in v]
+        if missing:
+            raise ValueError(f"missing {len(missing)} joint DOF(s), e.g. {missing[0]!r}")
+        if not all(np.all(np.isfinite(x)) for x in v.values()):
+            raise ValueError("joint angles must be finite")
+        return v
+
+    @model_validator(mode="after")
+    def _same_length(self):
+        n = {len(self.phase_l), len(self.phase_r), *(len(x) for x in self.joints.values())}
+        if len(n) != 1:
+            raise ValueError("phase_l, phase_r and every joint list must have the same length")
+        return self
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(codes (T, 2) [left, right], joint angles (T, N_JOINT) in JOINT_DOF_NAMES order)."""
+        return (np.column_stack([self.phase_l, self.phase_r]),
+                np.column_stack([self.joints[d] for d in JOINT_DOF_NAMES]))
+
+    @classmethod
+    def from_arrays(cls, codes: np.ndarray, joints: np.ndarray) -> "ExamplePoses":
+        return cls(phase_l=[round(float(x), 4) for x in codes[:, 0]], phase_r=[round(float(x), 4) for x in codes[:, 1]],
+                   joints={d: [round(float(x), 5) for x in joints[:, j]] for j, d in enumerate(JOINT_DOF_NAMES)})
+
+
 class Style(BaseModel):
     """The 147 style parameters θ; see the module docstring for units."""
 
@@ -55,6 +107,7 @@ class Style(BaseModel):
     k_shoe: float = Field(ge=0.0, le=1e7)
     h_rest: float = Field(ge=0.0, le=0.1)
     provenance: Provenance | None = None
+    example: ExamplePoses | None = None
 
     @field_validator(*PER_DOF_FIELDS, mode="before")
     @classmethod
@@ -109,6 +162,8 @@ class Style(BaseModel):
         out["h_rest"] = float(self.h_rest)
         if self.provenance is not None:
             out["provenance"] = self.provenance.model_dump(exclude_none=True)
+        if self.example is not None:
+            out["example"] = self.example.model_dump()
         return out
 
 

@@ -133,6 +133,20 @@ def test_learned_header_repeats_non_default_options():
     assert (a.counterexamples, a.hessian, a.alpha_floor) == ("ipopt", "exact", 0.6)
 
 
+def test_example_of_covers_the_gait_cycle(small):
+    """The example poses a learned style carries: X_T sampled at 30 fps, every sample keyed by
+    both legs' phase codes, stance and swing of each leg represented, joints copied exactly."""
+    from scenegraph.body import N_ROOT
+    from scenegraph.nio import example_of
+    ch, fs, m, _ = small
+    codes, joints = example_of(m, fs).arrays()
+    t, q = m.sample(30.0)
+    assert codes.shape == (len(t), 2) and np.allclose(joints, q[:, N_ROOT:], atol=1e-5)
+    assert np.all((codes >= 0) & (codes <= 2))
+    for leg in (0, 1):
+        assert (codes[:, leg] < 1).any() and (codes[:, leg] > 1).any()
+
+
 def test_resample_keeps_the_motion(small):
     from scenegraph.nio import resample
     _, _, m, _ = small
@@ -210,6 +224,7 @@ def test_shipped_styles_have_provenance():
         extra = pv.model_extra or {}
         assert set(extra["resynth_rms_deg"]) >= {"learned", "default", "springs_off"}, f
         assert "compose learn" in f.read_text().splitlines()[0], f
+        assert st.example is not None and len(st.example.phase_l) >= 20, f  # X_T's poses by leg phase
 
 
 @pytest.mark.slow

@@ -9,6 +9,7 @@ import sys
 import typing
 from pathlib import Path
 
+import numpy as np
 import pytest
 from pydantic import BaseModel
 
@@ -327,3 +328,34 @@ def test_gait_change_generates_walk_then_run_footsteps():
     lengths = [b.position[0] - a.position[0] for a, b in zip(steps, steps[1:])]
     assert lengths[-1] > 1.4 * lengths[0]
     assert 4.4 - 1.2 < steps[-1].position[0] < 4.4  # the last landing is one run step short of the end
+
+
+def test_initial_motion_from_the_styles_example(tmp_path):
+    """`initial_motion: example` takes the initial guess's joint angles from the poses the
+    learned style carries (matched by leg phase, paper §7); the generator's differ.  A style
+    without example poses is an input error at that field's line."""
+    from scenegraph.body import N_ROOT
+    from scenegraph.gait import leg_phase, phase_code
+    from scenegraph.scene import build_scene
+    from scenegraph.style import load_style
+
+    text = (bundled.BUNDLED_DIR / "walk.yaml").read_text()
+    assert "    style: walk\n" in text
+    ex_file = tmp_path / "walk_ex.yaml"
+    ex_file.write_text(text.replace("    style: walk\n", "    style: walk\n    initial_motion: example\n"))
+    ex, gen = (build_scene(load_scenario(f)).characters[0] for f in (ex_file, bundled.BUNDLED_DIR / "walk.yaml"))
+    codes, joints = load_style(bundled.STYLES_DIR / "walk.yaml").example.arrays()
+    t = 0.4
+    code = np.array([phase_code(leg_phase(ex.footsteps, f, t)) for f in ("l", "r")])
+    d = np.abs(codes - code)
+    j = int(np.argmin(np.minimum(d, 2 - d).sum(axis=1)))
+    q_ex, q_gen = (np.asarray(c.motion.at([t])[0]).ravel()[N_ROOT:] for c in (ex, gen))
+    assert np.degrees(np.sqrt(np.mean((q_ex - joints[j]) ** 2))) < 5.0  # spline fit of the sampled poses
+    assert np.degrees(np.sqrt(np.mean((q_gen - joints[j]) ** 2))) > 2 * np.degrees(
+        np.sqrt(np.mean((q_ex - joints[j]) ** 2)))
+    bad = tmp_path / "walk_default.yaml"
+    bad.write_text(ex_file.read_text().replace("    style: walk\n", "    style: default\n"))
+    with pytest.raises(InputError) as exc:
+        build_scene(load_scenario(bad))
+    line = bad.read_text().splitlines().index("    initial_motion: example") + 1
+    assert f"{bad}:{line}:" in str(exc.value) and "no example poses" in str(exc.value)

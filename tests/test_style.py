@@ -43,6 +43,30 @@ def test_yaml_round_trip(tmp_path):
     assert (tmp_path / "again.yaml").read_text() == path.read_text().split("\n", 1)[1]
 
 
+def test_example_poses_round_trip_and_bad_example(tmp_path):
+    """A learned style's example poses (phase codes and joint angles) survive save and load; a
+    malformed example block fails with the file, its line and the field."""
+    from scenegraph.style import ExamplePoses
+    rng = np.random.default_rng(3)
+    codes = rng.uniform(0, 2, (12, 2))
+    joints = rng.uniform(-1, 1, (12, N_JOINT))
+    s = default_style().with_(example=ExamplePoses.from_arrays(codes, joints))
+    path = tmp_path / "ex.yaml"
+    save_style(s, path)
+    c2, j2 = load_style(path).example.arrays()
+    assert np.allclose(c2, codes, atol=1e-4) and np.allclose(j2, joints, atol=1e-5)
+    assert load_style(path).vector().shape == (5 * N_JOINT + 2,)  # not part of θ
+    data = yaml.safe_load(path.read_text())
+    data["example"]["joints"]["knee_flex_l"].pop()
+    src = yaml.safe_dump(data, sort_keys=False, default_flow_style=False)
+    path.write_text(src)
+    with pytest.raises(InputError) as exc:
+        load_style(path)
+    msg = str(exc.value)
+    assert "same length" in msg and exc.value.location.field.startswith("example"), msg
+    assert f"{path}:{_value_line(src, 'example')}:" in msg, msg
+
+
 def test_per_dof_fields_accept_a_list_in_dof_order(tmp_path):
     data = default_style().to_data()
     data["ks2"] = [float(x) for x in range(1, N_JOINT + 1)]
