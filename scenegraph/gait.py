@@ -110,13 +110,14 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
     xy, heading = _root_path(footsteps, times)
     stand = standing_pose(ch)
     q = np.zeros((len(times), N_DOF))
-    ex_phases = None
+    ex_phases, phase_steps = None, footsteps
     if example is not None:
         if len(example) == 3:  # an example motion
             example = example_poses(example[2], example[0], example[1][:, N_ROOT:])
         ex_phases, ex_joints = (np.asarray(a, float) for a in example)
+        phase_steps = _uncut(footsteps, t0, t1)  # phases counted as in the example
     for i, t in enumerate(times):
-        ph_l, ph_r = leg_phase(footsteps, "l", t), leg_phase(footsteps, "r", t)
+        ph_l, ph_r = leg_phase(phase_steps, "l", t), leg_phase(phase_steps, "r", t)
         if isinstance(run, bool):
             w_run = float(run)
         else:  # walk → run over RUN_BLEND seconds around the given time (smoothstep)
@@ -147,13 +148,20 @@ def example_poses(footsteps: tuple[Footstep, ...], times, joints) -> tuple[np.nd
     first extended to the longest, so its phase counts from the real heel strike / to the
     real toe-off (07_01's last 0.07 s of a stance would otherwise read as a whole stance)."""
     times = np.asarray(times, float)
-    lo, hi = times[0] + 1e-6, times[-1] - 1e-6
-    d = max((f.t1 - f.t0 for f in footsteps), default=0.0)
-    footsteps = tuple(f if f.t1 - f.t0 >= 0.8 * d else
-                      replace(f, t0=f.t1 - d) if f.t0 <= lo else
-                      replace(f, t1=f.t0 + d) if f.t1 >= hi else f for f in footsteps)
+    footsteps = _uncut(footsteps, times[0], times[-1])
     codes = np.array([[phase_code(leg_phase(footsteps, f, t)) for f in ("l", "r")] for t in times])
     return codes, np.asarray(joints, float)
+
+
+def _uncut(footsteps: tuple[Footstep, ...], t0: float, t1: float) -> tuple[Footstep, ...]:
+    """Stances cut by the ends t0, t1 (s) of a motion (under 80 % of the longest stance)
+    extended to the longest, beyond the motion, so that leg phases count from the real heel
+    strike / to the real toe-off."""
+    lo, hi = t0 + 1e-6, t1 - 1e-6
+    d = max((f.t1 - f.t0 for f in footsteps), default=0.0)
+    return tuple(f if f.t1 - f.t0 >= 0.8 * d else
+                 replace(f, t0=f.t1 - d) if f.t0 <= lo else
+                 replace(f, t1=f.t0 + d) if f.t1 >= hi else f for f in footsteps)
 
 
 def phase_code(ph: tuple[str, float]) -> float:
