@@ -34,7 +34,8 @@ is minimised in a trust box (an LP, Σα = 1 held exactly so D = 0); each trial 
 counterexample, which joins the model; G of the current θ is re-read with every new
 counterexample.  The paper's preconditioned gradient step with the halving line search of
 footnote 3 is kept as ``method="gradient"``; with the noisy counterexamples of a 60-iteration
-solve it stalled (G 0.0022 → 0.0016, then no decrease).
+solve it stalled (G 0.0022 → 0.0016, then no decrease).  ``NIO(alpha_floor=a)`` bounds every α_j ≥ a in
+the bundle step (an experiment, README "α floor": α = 0 makes a joint's torque free).
 
 Local counterexamples (``NIO(local=True)``, the default of :func:`learn_style`): one
 Gauss–Newton step from X_T within C (:meth:`NIO.local_counterexample`), i.e. G measured
@@ -833,7 +834,6 @@ def feasible_target(ch: Character, motion: Motion, footsteps: tuple[Footstep, ..
     nK = b.p.shape[0] - N_JOINT * N
     p = np.concatenate([b.p[:nK], np.zeros(N_JOINT * N)])  # sqrt(α) = 0: no muscle energy
     return solve(sp, replace(b, p=p))
-
 
 
 def example_of(target: Motion, footsteps: tuple[Footstep, ...], fps: float = 30.0) -> ExamplePoses:

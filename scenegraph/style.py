@@ -45,6 +45,16 @@ class Provenance(BaseModel):
     g_final: float | None = None
 
 
+def _check_dof_names(v: dict) -> None:
+    """A per-DOF mapping must name every joint DOF once and nothing else."""
+    unknown = sorted(set(v) - set(JOINT_DOF_NAMES))
+    if unknown:
+        raise ValueError(f"unknown joint DOF {unknown[0]!r}")
+    missing = [d for d in JOINT_DOF_NAMES if d not in v]
+    if missing:
+        raise ValueError(f"missing {len(missing)} joint DOF(s), e.g. {missing[0]!r}")
+
+
 class ExamplePoses(BaseModel):
     """Poses of a style's example motion by leg phase.  Sample i has the phase codes
     ``phase_l[i]``, ``phase_r[i]`` (stance [0, 1), swing [1, 2): ``gait.phase_code``) and the
@@ -65,12 +75,7 @@ class ExamplePoses(BaseModel):
     @field_validator("joints")
     @classmethod
     def _dofs(cls, v):
-        unknown = sorted(set(v) - set(JOINT_DOF_NAMES))
-        if unknown:
-            raise ValueError(f"unknown joint DOF {unknown[0]!r}")
-        missing = [d for d in JOINT_DOF_NAMES if d not in v]
-        if missing:
-            raise ValueError(f"missing {len(missing)} joint DOF(s), e.g. {missing[0]!r}")
+        _check_dof_names(v)
         if not all(np.all(np.isfinite(x)) for x in v.values()):
             raise ValueError("joint angles must be finite")
         return v
@@ -114,12 +119,7 @@ class Style(BaseModel):
     def _per_dof(cls, v, info):
         name = info.field_name
         if isinstance(v, dict):
-            unknown = sorted(set(v) - set(JOINT_DOF_NAMES))
-            if unknown:
-                raise ValueError(f"unknown joint DOF {unknown[0]!r}")
-            missing = [d for d in JOINT_DOF_NAMES if d not in v]
-            if missing:
-                raise ValueError(f"missing {len(missing)} joint DOF(s), e.g. {missing[0]!r}")
+            _check_dof_names(v)
             v = [v[d] for d in JOINT_DOF_NAMES]
         try:
             arr = np.asarray(v, dtype=float)
