@@ -116,6 +116,28 @@ def test_cli_learn_bad_input(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.slow
+def test_compose_learn_end_to_end(tmp_path):
+    """`compose learn` on one gait cycle of the shipped 07_01 clip (3 NIO iterations): writes a
+    style that loads, with its provenance, the "learned by" line naming the non-default
+    option, and the example poses of X_T."""
+    from pathlib import Path
+
+    from schedules.cli import main
+    from scenegraph.style import load_style
+    clip = Path(__file__).resolve().parents[1] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
+    out = tmp_path / "w.yaml"
+    assert main(["learn", str(clip), "--frames", "64:201", "--max-iter", "3", "--alpha-floor", "0.2",
+                 "-o", str(out)]) == 0
+    st = load_style(out)
+    assert st.provenance.clip == clip.name and st.provenance.frames == "64:201"
+    assert st.alpha.min() >= 0.2 / N_JOINT - 1e-9
+    first = out.read_text().splitlines()[0]
+    assert first.startswith("# learned by: compose learn walk_neutral_cmu_07_01.bvh --frames 64:201")
+    assert "--alpha-floor 0.2" in first
+    assert st.example is not None and len(st.example.phase_l) == 35  # 1.13 s at 30 fps
+
+
 def test_learned_header_repeats_non_default_options():
     """A style file's "learned by" line must re-learn it: non-default NIO options become flags
     that `compose learn` accepts."""
