@@ -15,9 +15,11 @@ Semantics (kept identical for every ``--jobs``):
 * After every Step its result is written atomically to the run folder
   (``steps/NNN.pkl``), so ``resume=True`` replays finished Steps and solves only the rest.
 * A Step fails if IPOPT does not report success or a hard constraint group is violated by
-  more than ``VIOLATION_TOL`` (a *timing* step that hit its iteration cap with every hard
-  constraint satisfied is accepted: it only warm-starts the full step after it); the run stops with :class:`StepFailed` (exit code 1), naming
-  the step and the violated groups.  The run folder keeps every finished Step.
+  more than ``VIOLATION_TOL``; the run stops with :class:`StepFailed` (exit code 1), naming
+  the step and the violated groups.  Two exceptions: a *full* step that hit its iteration
+  cap with every hard constraint satisfied is kept with a warning (unless ``fail_capped``),
+  and a *timing* step that did not converge or violates a constraint is discarded (the full
+  step after it starts from the state before it).  The run folder keeps every finished Step.
 
 Test hook: ``COMPOSE_STOP_AFTER=N`` stops the process with exit code ``STOP_EXIT`` right
 after the N-th newly solved Step has been written; ``COMPOSE_MAX_ITER=N`` caps IPOPT
