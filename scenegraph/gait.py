@@ -98,9 +98,8 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
                    example=None, ground=None) -> Motion:
     """An initial motion over [t0, t1] (s) for the given footsteps.
 
-    ``example``: optional example poses matched by leg phase, either (codes (T, 2), joint
-    angles (T, 29)) as :func:`example_poses` returns them, or an example motion (times,
-    q (T, 35), footsteps); without it the built-in example gait is used.
+    ``example``: optional example poses matched by leg phase, (codes (T, 2), joint angles
+    (T, 29)) as :func:`example_poses` returns them; without it the built-in example gait is used.
     ``run``: True for running poses throughout, or the world time (s) of a walk → run change
     (poses blended over RUN_BLEND around it).
     ``ground`` (a :class:`~scenegraph.ground.Ground`): the pelvis height follows the ground
@@ -112,8 +111,6 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
     q = np.zeros((len(times), N_DOF))
     ex_phases, phase_steps = None, footsteps
     if example is not None:
-        if len(example) == 3:  # an example motion
-            example = example_poses(example[2], example[0], example[1][:, N_ROOT:])
         ex_phases, ex_joints = (np.asarray(a, float) for a in example)
         phase_steps = _uncut(footsteps, t0, t1)  # phases counted as in the example
     for i, t in enumerate(times):

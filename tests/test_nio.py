@@ -135,7 +135,7 @@ def test_compose_learn_end_to_end(tmp_path):
     first = out.read_text().splitlines()[0]
     assert first.startswith("# learned by: compose learn walk_neutral_cmu_07_01.bvh --frames 64:201")
     assert "--alpha-floor 0.2" in first
-    assert st.example is not None and len(st.example.phase_l) == 35  # 1.13 s at 30 fps
+    assert st.example is not None and len(st.example.phase_l) == 69  # 1.13 s at 60 fps
 
 
 def test_learned_header_repeats_non_default_options():
@@ -156,13 +156,13 @@ def test_learned_header_repeats_non_default_options():
 
 
 def test_example_of_covers_the_gait_cycle(small):
-    """The example poses a learned style carries: X_T sampled at 30 fps, every sample keyed by
+    """The example poses a learned style carries: X_T sampled at 60 fps, every sample keyed by
     both legs' phase codes, stance and swing of each leg represented, joints copied exactly."""
     from scenegraph.body import N_ROOT
     from scenegraph.nio import example_of
     ch, fs, m, _ = small
     codes, joints = example_of(m, fs).arrays()
-    t, q = m.sample(30.0)
+    t, q = m.sample(60.0)
     assert codes.shape == (len(t), 2) and np.allclose(joints, q[:, N_ROOT:], atol=1e-5)
     assert np.all((codes >= 0) & (codes <= 2))
     for leg in (0, 1):
@@ -250,7 +250,7 @@ def test_shipped_styles_have_provenance():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="learned / default / springs off 2.55 / 1.99 / 2.76 deg on 07_01 "
+@pytest.mark.xfail(strict=True, reason="learned / default / springs off 4.41 / 4.32 / 4.39 deg on 07_01 "
                                         "(2026-12-01): <= 5 deg, but not below the ablations (README, "
                                         "Learning a style)")
 def test_real_resynthesis_of_shipped_walk():
