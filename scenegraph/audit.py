@@ -15,7 +15,7 @@ from .footsteps import Footstep, contact_points
 from .ground import FLAT, Ground
 from .kinematics import handle_positions_fn
 from .motion import Motion
-from .spacetime import CONTACT_HANDLES, FORCE_HANDLES, residual_kernel, theta_kernel_vector
+from .residual import CONTACT_HANDLES, FORCE_HANDLES, residual_kernel, theta_kernel_vector
 from .style import Style
 
 __all__ = ["Audit", "audit_motion"]

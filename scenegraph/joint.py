@@ -8,25 +8,24 @@ both characters' full-dynamics spacetime subproblems as **one** IPOPT NLP,
     s.t. each character's own constraints (footsteps, ground, feet, bounds ...)
          palm_a(t_c) = palm_b(t_c)          at every coupling time t_c (hard hand-hold)
 
-with decision variables x_a, x_b (each character's own transcription, :func:`spacetime.build`)
+with decision variables x_a, x_b (each character's own transcription, :func:`problem.transcribe`)
 and the hand force F(t_c) (N, world, 3 per coupling time).  F acts +F on character a's handle
 and −F on character b's (equal and opposite); between coupling times it is interpolated
 linearly, so each character's inverse dynamics sees F at its own collocation points.
 
-How the force enters: each character gets a :class:`~scenegraph.spacetime.Spring` on its
-coupled handle whose anchor is an NLP parameter (``Built.anchor_slices``); here the anchor is
+How the force enters: each character gets a :class:`~scenegraph.problem.Spring` on its
+coupled handle whose anchor is an NLP parameter (``NLP.anchor_slices``); here the anchor is
 replaced by ``own handle(x) + σ F / k`` (σ = ±1), so the spring force k (anchor − handle) is
 exactly σ F — through the very code path (kernel input at the handle, reported as an external
 force at the handle) that the schedules' rubber band uses.
 
-The Hessian given to IPOPT is built as :func:`spacetime.build` builds it (Gauss–Newton 2 JᵀJ
+The Hessian given to IPOPT is built as :func:`problem.transcribe` builds it (Gauss–Newton 2 JᵀJ
 of the stacked residuals of both characters, plus the exact Hessian of every kinematic
 constraint, the coupling included), with the same IPOPT options and the same stall rule, so
 timings compare like with like.  The timewarps are held (as in the schedules' full steps).
 """
 from __future__ import annotations
 
-import os as _os
 import time as _time
 from dataclasses import dataclass, replace
 
@@ -34,8 +33,9 @@ import casadi as ca
 import numpy as np
 
 from .motion import basis
-from .spacetime import (Built, Result, Spring, StallMonitor, Subproblem, build, handles_kernel, read_solution,
-                        violations)
+from .problem import (NLP, Result, SolveTiming, Spring, Subproblem, create_nlpsol, read_solution, solver_options,
+                      transcribe, violations)
+from .residual import handles_kernel
 
 __all__ = ["JointCoupling", "JointResult", "build_joint", "solve_joint", "coupling_times", "F_SCALE",
            "JOINT_SPRING_K"]
@@ -65,7 +65,7 @@ def coupling_times(interval: tuple[float, float], hz: float = 30.0) -> tuple[flo
 
 @dataclass
 class JointBuilt:
-    built: tuple[Built, Built]
+    nlps: tuple[NLP, NLP]  # each character's transcription (with its stand-in spring)
     coupling: JointCoupling
     solver: ca.Function
     x0: np.ndarray
@@ -79,6 +79,7 @@ class JointBuilt:
     palms: ca.Function  # joint x -> (handle_a, handle_b) at the coupling times (3 × n each)
     monitor: object
     seconds_build: float
+    callback: object = None  # the iteration callback in use (the monitor, or one from nlpsol_options)
 
 
 @dataclass
@@ -95,6 +96,7 @@ class JointResult:
     objective: float
     gap_max: float  # m, max |handle_a − handle_b| at the coupling times
     violations: dict
+    timing: SolveTiming | None = None  # of the joint solve (each character's Result carries the same)
 
     def summary(self) -> str:
         return (f"joint: {self.status} in {self.iterations} it, {self.seconds:.1f} s "
@@ -123,11 +125,11 @@ def _interp_matrix(t_from: np.ndarray, t_to: np.ndarray) -> np.ndarray:
     return M
 
 
-def _handle_fn(b: Built, handle: str, s: np.ndarray) -> ca.Function:
+def _handle_fn(b: NLP, handle: str, s: np.ndarray) -> ca.Function:
     """x -> handle position (3 × len(s)) at canonical times s (SX, expandable)."""
     sp = b.sp
     xs = ca.SX.sym("x", b.x0.size)
-    P = b.ctrl_fn(xs, b.p)  # (K, 35)
+    P = b.ctrl_fn(xs, b.p0)  # (K, 35)
     Q = ca.mtimes(ca.DM(basis(sp.motion.n_ctrl, s, 0)), P).T  # (35, n)
     hk = handles_kernel(sp.character, (handle,))
     return ca.Function("handle", [xs], [hk.map(len(s))(Q)])
@@ -139,8 +141,8 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> 
     t0 = _time.perf_counter()
     tc = np.asarray(coupling.times, float)
     nc = len(tc)
-    bs = (build(_with_stand_in_spring(sp_a, coupling.handle_a, tc)),
-          build(_with_stand_in_spring(sp_b, coupling.handle_b, tc)))
+    bs = (transcribe(_with_stand_in_spring(sp_a, coupling.handle_a, tc)),
+          transcribe(_with_stand_in_spring(sp_b, coupling.handle_b, tc)))
     na, nb, nf = bs[0].x0.size, bs[1].x0.size, 3 * nc
     X = ca.MX.sym("X", na + nb + nf)
     xa, xb, u = X[:na], X[na:na + nb], X[na + nb:]
@@ -157,26 +159,26 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> 
         M = _interp_matrix(tc, t_pts)  # (N, nc)
         own = _handle_fn(b, handle, b.s_points)(x)  # (3, N)
         anchor = own + sign * ca.mtimes(Fn, ca.DM(M.T)) / JOINT_SPRING_K
-        p_exprs.append(ca.vertcat(ca.DM(b.p[:sl.start]), ca.vec(anchor), ca.DM(b.p[sl.stop:])))
+        p_exprs.append(ca.vertcat(ca.DM(b.p0[:sl.start]), ca.vec(anchor), ca.DM(b.p0[sl.stop:])))
         handle_c.append(_handle_fn(b, handle, b.sp.motion.to_canonical(tc))(xsym))
     pa, pb = p_exprs
 
     # objective: the stacked residuals of both characters
     rho_dyn = ca.vertcat(bs[0].rho_dyn_fn(xa, pa), bs[1].rho_dyn_fn(xb, pb))
-    rho_xs = ca.vertcat(bs[0].rho_extra_fn(xas, bs[0].p), bs[1].rho_extra_fn(xbs, bs[1].p))
+    rho_xs = ca.vertcat(bs[0].rho_extra_fn(xas, bs[0].p0), bs[1].rho_extra_fn(xbs, bs[1].p0))
     rho_x = ca.Function("rho_x", [Xs], [rho_xs])(X)
     f = ca.sumsqr(rho_dyn) + ca.sumsqr(rho_x)
 
     # constraints: each character's own, then the coupling (handle_a − handle_b at tc)
     gap = ca.vec(handle_c[0] - handle_c[1])
-    ga, gb = bs[0].g_fn(xas, bs[0].p), bs[1].g_fn(xbs, bs[1].p)
+    ga, gb = bs[0].g_fn(xas, bs[0].p0), bs[1].g_fn(xbs, bs[1].p0)
     gs = ca.vertcat(ga, gb, gap)
     ng_a, ng_b = bs[0].lbg.size, bs[1].lbg.size
     lbg = np.concatenate([bs[0].lbg, bs[1].lbg, np.zeros(nf)])
     ubg = np.concatenate([bs[0].ubg, bs[1].ubg, np.zeros(nf)])
     g = ca.Function("g_joint", [Xs], [gs])(X)
 
-    # Hessian as in spacetime.build: Gauss–Newton objective + exact constraint Hessian
+    # Hessian as in problem.transcribe: Gauss–Newton objective + exact constraint Hessian
     lam_f = ca.MX.sym("lam_f")
     lam_g = ca.MX.sym("lam_g", gs.shape[0])
     J_dyn = ca.jacobian(rho_dyn, X)
@@ -189,22 +191,11 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> 
                        ["hess_gamma_x_x"])
     ps = ca.SX.sym("p", 0)
     jac_g = ca.Function("nlp_jac_g", [Xs, ps], [gs, ca.jacobian(gs, Xs)], ["x", "p"], ["g", "jac_g_x"])
-    sp = sp_a
-    opts = {
-        "hess_lag": hess, "jac_g": jac_g, "print_time": False,
-        "ipopt": {"print_level": int(_os.environ.get("COMPOSE_IPOPT_PRINT", "0")),
-                  "max_iter": max(sp_a.max_iter, sp_b.max_iter), "tol": min(sp_a.tol, sp_b.tol),
-                  "acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "adaptive",
-                  "linear_solver": "mumps", "sb": "yes"},
-    }
-    opts["ipopt"].update(dict(sp.ipopt_options))
-    opts.update(dict(sp.nlpsol_options))
-    monitor = None
-    patience = max(sp_a.stall_iterations, sp_b.stall_iterations)
-    if patience > 0:
-        monitor = StallMonitor(X.shape[0], gs.shape[0], lbg, ubg, patience)
-        opts["iteration_callback"] = monitor
-    solver = ca.nlpsol("joint", "ipopt", {"x": X, "p": empty, "f": f, "g": g}, opts)
+    # sp_a's options (ipopt_options, nlpsol_options), the larger iteration cap and the tighter tol
+    opts = {"hess_lag": hess, "jac_g": jac_g,
+            **solver_options(sp_a, max_iter=max(sp_a.max_iter, sp_b.max_iter), tol=min(sp_a.tol, sp_b.tol))}
+    solver, monitor, callback = create_nlpsol("joint", {"x": X, "p": empty, "f": f, "g": g}, opts, lbg, ubg,
+                                              max(sp_a.stall_iterations, sp_b.stall_iterations))
 
     x0 = np.concatenate([bs[0].x0, bs[1].x0, np.zeros(nf)])
     lbx = np.concatenate([bs[0].lbx, bs[1].lbx, np.full(nf, -np.inf)])
@@ -213,15 +204,15 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> 
                       (slice(0, na), slice(na, na + nb), slice(na + nb, na + nb + nf)),
                       (slice(0, ng_a), slice(ng_a, ng_a + ng_b), slice(ng_a + ng_b, ng_a + ng_b + nf)),
                       ca.Function("p_of", [X], [pa, pb]),
-                      ca.Function("palms", [Xs], handle_c), monitor, _time.perf_counter() - t0)
+                      ca.Function("palms", [Xs], handle_c), monitor, _time.perf_counter() - t0, callback)
 
 
-def _character_result(b: Built, x: np.ndarray, p: np.ndarray, status: str, ok: bool, iterations: int,
-                      seconds: float, objective: float) -> Result:
-    """A per-character Result read off the joint solution (as spacetime.solve reads its own)."""
+def _character_result(b: NLP, x: np.ndarray, p: np.ndarray, status: str, ok: bool, iterations: int,
+                      seconds: float, objective: float, timing: SolveTiming) -> Result:
+    """A per-character Result read off the joint solution (as problem.solve reads its own)."""
     motion, steps, energy, contact = read_solution(b, x, p)
     return Result(motion, steps, status, ok, iterations, seconds, energy, objective,
-                  violations(b, x, p), contact, b.sp.label)
+                  violations(b, x, p), contact, b.sp.label, timing)
 
 
 def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
@@ -232,12 +223,14 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
     t1 = _time.perf_counter()
     if jb.monitor is not None and hasattr(jb.monitor, "reset"):
         jb.monitor.reset()
+    cb_before = getattr(jb.callback, "seconds", 0.0)
+    t_call = _time.perf_counter()
     sol = jb.solver(x0=jb.x0, lbx=jb.lbx, ubx=jb.ubx, lbg=jb.lbg, ubg=jb.ubg)
     t2 = _time.perf_counter()
     stats = jb.solver.stats()
     x = np.asarray(sol["x"]).ravel()
     f_final = float(sol["f"])
-    m_ = jb.monitor  # as spacetime.solve: IPOPT ending worse than a feasible iterate it passed
+    m_ = jb.monitor  # as problem.solve: IPOPT ending worse than a feasible iterate it passed
     if m_ is not None and getattr(m_, "best_x", None) is not None and m_.best < f_final - 1e-9 * max(1.0, abs(f_final)):
         x, f_final = m_.best_x, m_.best
     status = stats.get("return_status", "unknown")
@@ -247,8 +240,11 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
     iters = int(stats.get("iter_count", -1))
     pa, pb = (np.asarray(v).ravel() for v in jb.p_of(x))
     seconds = t2 - t0  # build (unless given) + solve
-    res = tuple(_character_result(b, x[sl], p, status, ok, iters, seconds, f_final)
-                for b, sl, p in zip(jb.built, jb.slices[:2], (pa, pb)))
+    timing = SolveTiming.from_stats(stats, build=t1 - t0 if built is None else 0.0,
+                                    callbacks=getattr(jb.callback, "seconds", 0.0) - cb_before,
+                                    solver_wall=t2 - t_call, total=seconds)
+    res = tuple(_character_result(b, x[sl], p, status, ok, iters, seconds, f_final, timing)
+                for b, sl, p in zip(jb.nlps, jb.slices[:2], (pa, pb)))
     ha, hb = (np.asarray(v) for v in jb.palms(x))
     gap = float(np.linalg.norm(ha - hb, axis=0).max())
     viol = {}
@@ -258,4 +254,4 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
     viol["coupling"] = float(np.abs(ha - hb).max())
     force = F_SCALE * x[jb.slices[2]].reshape(-1, 3)  # column-major (3, nc) -> rows per time
     return JointResult(res, np.asarray(coupling.times, float), force, status, ok, iters, seconds,
-                       jb.seconds_build if built is None else 0.0, t2 - t1, f_final, gap, viol)
+                       jb.seconds_build if built is None else 0.0, t2 - t1, f_final, gap, viol, timing)

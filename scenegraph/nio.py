@@ -68,8 +68,9 @@ from .body import G, N_DOF, N_JOINT, N_ROOT, Character
 from .dynamics import friction_basis
 from .footsteps import Footstep
 from .motion import Motion
-from .spacetime import (FORCE_HANDLES, OBJ_SCALE, W_ROOT, Built, IterationCallback, Result, Subproblem,
-                        build, residual_kernel, solve, violations)
+from .problem import (NLP, OBJ_SCALE, Built, IterationCallback, PoseTarget, Result, Subproblem, build,
+                      make_solver, solve, transcribe, violations)
+from .residual import FORCE_HANDLES, W_ROOT, residual_kernel
 from .style import ExamplePoses, Provenance, Style, default_style
 
 __all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style", "joint_rms_deg",
@@ -163,7 +164,7 @@ class _BestIterate(IterationCallback):
     def reset(self):
         self.best_f, self.best_x = np.inf, None
 
-    def eval(self, arg):
+    def on_iterate(self, arg):
         f = float(arg[1])
         if f < self.best_f and self.violation(arg[2]) <= self.tol:
             self.best_f, self.best_x = f, np.asarray(arg[0]).ravel().copy()
@@ -238,14 +239,13 @@ class NIO:
         # below E(X_T) on 07_01 (G = 0 at the first iteration, measured).
         self.hessian = hessian
         t = _time.perf_counter()
-        self.built: Built = build(self.sp)
-        # rebuild with an iteration callback that keeps the best feasible iterate
-        b = self.built
+        self.nlp: NLP = transcribe(self.sp)
+        # the solver's iteration callback keeps the best feasible iterate
+        b = self.nlp
         self._best = _BestIterate(b.x0.size, b.lbg.size, b.lbg, b.ubg, 0.5 * feas_tol)
         self.sp = replace(self.sp, nlpsol_options=(("iteration_callback", self._best),))
-        self.built = build(self.sp)
+        self.built: Built = make_solver(self.nlp, self.sp)
         self.build_seconds = _time.perf_counter() - t
-        b = self.built
         s = b.s_points
         self.N = N = len(s)
         wq = np.zeros(N)
@@ -278,7 +278,7 @@ class NIO:
         return ca.Function("nio_E", [th, q, qd, qdd, F], [E, ca.gradient(E, th)])
 
     def states(self, motion: Motion):
-        q, qd, qdd = motion.state_at_s(self.built.s_points)
+        q, qd, qdd = motion.state_at_s(self.nlp.s_points)
         return q.T, qd.T, qdd.T
 
     def forces(self, motion: Motion, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -292,8 +292,9 @@ class NIO:
         Q0, J = np.asarray(Q0), np.asarray(J)  # J: (35, 24 N)
         wsq = np.sqrt(np.r_[np.maximum(theta[:N_JOINT], 0.0), np.full(N_ROOT, W_ROOT)])
         F = np.zeros((nf, self.N))
-        lam = np.zeros(self.built.lam_slice.stop - self.built.lam_slice.start)
-        off = self.built.lam_slice.start
+        lam_slice = self.nlp.x_layout["lambda"]
+        lam = np.zeros(lam_slice.stop - lam_slice.start)
+        off = lam_slice.start
         for k, pl in enumerate(self.planted):
             if not pl:
                 continue
@@ -331,38 +332,35 @@ class NIO:
     def counterexample(self, theta: np.ndarray, start: Motion | None = None,
                        lam0: np.ndarray | None = None) -> Result:
         """X_S: the spacetime solve for style θ warm-started at ``start`` (default X_T)."""
-        b = self.built
-        N = self.N
-        nK = b.p.shape[0] - (N_THETA_FULL - N_JOINT) * N - N_JOINT * N
-        TH = np.tile(theta[N_JOINT:, None], (1, N))
-        SA = np.tile(np.sqrt(np.maximum(theta[:N_JOINT], 0.0))[:, None], (1, N))
-        p = np.concatenate([b.p[:nK], TH.ravel(order="F"), SA.ravel(order="F")])
+        b = self.nlp
+        p = self._params(theta)
         x0 = b.x0.copy()
         if start is not None:
-            nq = start.ctrl.size
-            x0[:nq] = np.asarray(start.ctrl, float).ravel()
+            x0[b.x_layout["ctrl"]] = np.asarray(start.ctrl, float).ravel()  # NIO frees every control point
         if lam0 is not None:
-            x0[b.lam_slice] = lam0
+            x0[b.x_layout["lambda"]] = lam0
         t = _time.perf_counter()
         self._best.reset()
-        bb = replace(b, p=p, x0=x0)
-        res = solve(self.sp, bb)
+        res = solve(self.sp, self.built, x0=x0, p=p)
         if self._best.best_x is not None and self._best.best_f < res.objective:
             # IPOPT ended above its best feasible iterate: use that one
             x = self._best.best_x
             P, W = (np.asarray(v, float) for v in b.unpack(x, p)[:2])
             res = replace(res, motion=Motion(P, W.ravel()), objective=float(self._best.best_f),
-                          violations=violations(bb, x), status=res.status + "+best_iterate")
+                          violations=violations(b, x, p), status=res.status + "+best_iterate")
         self.solve_seconds += _time.perf_counter() - t
         self.n_solves += 1
         return res
 
     def _params(self, theta: np.ndarray) -> np.ndarray:
-        b, N = self.built, self.N
-        nK = b.p.shape[0] - (N_THETA_FULL - N_JOINT) * N - N_JOINT * N
+        """The NLP's parameters with style θ (147) at every collocation point."""
+        b, N = self.nlp, self.N
         TH = np.tile(theta[N_JOINT:, None], (1, N))
         SA = np.tile(np.sqrt(np.maximum(theta[:N_JOINT], 0.0))[:, None], (1, N))
-        return np.concatenate([b.p[:nK], TH.ravel(order="F"), SA.ravel(order="F")])
+        p = b.p0.copy()
+        p[b.p_layout["theta"]] = TH.ravel(order="F")
+        p[b.p_layout["sqrt_alpha"]] = SA.ravel(order="F")
+        return p
 
     def local_counterexample(self, theta: np.ndarray, start: Motion, lam0: np.ndarray,
                              steps: tuple[float, ...] = (1.0, 0.5, 0.25, 0.1, 0.05, 0.02, 0.01)) -> tuple[Motion, float]:
@@ -380,15 +378,16 @@ class NIO:
         import scipy.sparse as sps
         import scipy.sparse.linalg as spla
 
-        b = self.built
+        b = self.nlp
         if not hasattr(self, "_fns"):
-            sv = b.solver
+            sv = self.built.solver
             self._fns = (sv.get_function("nlp_grad_f"), sv.get_function("nlp_hess_l"), sv.get_function("nlp_jac_g"))
         fgrad, fhess, fjac = self._fns
         p = self._params(theta)
         x = b.x0.copy()
-        x[:start.ctrl.size] = np.asarray(start.ctrl, float).ravel()  # NIO frees every control point
-        x[b.lam_slice] = lam0
+        x[b.x_layout["ctrl"]] = np.asarray(start.ctrl, float).ravel()  # NIO frees every control point
+        lam_slice = b.x_layout["lambda"]
+        x[lam_slice] = lam0
         _, gf = fgrad(x, p)
         gf = np.asarray(gf, float).ravel()
         Hu = sps.csc_matrix(fhess(x, p, 1.0, np.zeros(b.lbg.size)).sparse())  # upper triangle
@@ -400,7 +399,7 @@ class NIO:
         active = (np.abs(gv - b.lbg) <= tol) | (np.abs(gv - b.ubg) <= tol)
         A = Jg[np.flatnonzero(active)]
         n = x.size
-        lam_idx = np.arange(b.lam_slice.start, b.lam_slice.stop)
+        lam_idx = np.arange(lam_slice.start, lam_slice.stop)
         fixed = lam_idx[x[lam_idx] <= 1e-12]
         if fixed.size:
             A = sps.vstack([A, sps.csr_matrix((np.ones(fixed.size), (np.arange(fixed.size), fixed)), shape=(fixed.size, n))])
@@ -412,10 +411,10 @@ class NIO:
         best, best_E, best_v = start, np.inf, 0.0
         for a in steps:
             xa = x + a * d
-            xa[b.lam_slice] = np.maximum(xa[b.lam_slice], 0.0)
+            xa[lam_slice] = np.maximum(xa[lam_slice], 0.0)
             P = np.asarray(b.unpack(xa, p)[0], float)
             m_a = Motion(P, np.asarray(start.warp, float))
-            v = max(violations(replace(b, p=p), xa).values(), default=0.0)
+            v = max(violations(b, xa, p).values(), default=0.0)
             if v > self.feas_tol:
                 continue
             E = self.measure(theta, m_a)[0]
@@ -469,11 +468,11 @@ class NIO:
                      label=f"resynth{'-warm' if warm else ''}:{style.name}",
                      ipopt_options=WARM_START if warm else (("acceptable_iter", 0),))
         b = build(sp)
+        x0 = None
         if warm:
-            x0 = b.x0.copy()
-            x0[b.lam_slice] = self.forces(self.target, style.vector())[1]
-            b = replace(b, x0=x0)
-        return solve(sp, b)
+            x0 = b.nlp.x0.copy()
+            x0[b.nlp.x_layout["lambda"]] = self.forces(self.target, style.vector())[1]
+        return solve(sp, b, x0=x0)
 
     # --- the learning loop ----------------------------------------------------------------
     def run(self, theta0: np.ndarray, *, method: str = "bundle", **kw) -> NIOResult:
@@ -820,7 +819,6 @@ def feasible_target(ch: Character, motion: Motion, footsteps: tuple[Footstep, ..
     otherwise beaten by every counterexample for the wrong
     reason (it is outside C).
     """
-    from .spacetime import PoseTarget
     n = max(2, int(round(motion.duration * hz)) + 1)
     t = motion.start + np.arange(n) * (motion.duration / (n - 1))
     q = motion.canonical(motion.to_canonical(t))
@@ -830,10 +828,9 @@ def feasible_target(ch: Character, motion: Motion, footsteps: tuple[Footstep, ..
                     max_iter=max_iter, tol=tol, label="nio-target",
                     ipopt_options=(("acceptable_iter", 0),))
     b = build(sp)
-    N = len(b.s_points)
-    nK = b.p.shape[0] - N_JOINT * N
-    p = np.concatenate([b.p[:nK], np.zeros(N_JOINT * N)])  # sqrt(α) = 0: no muscle energy
-    return solve(sp, replace(b, p=p))
+    p = b.nlp.p0.copy()
+    p[b.nlp.p_layout["sqrt_alpha"]] = 0.0  # sqrt(α) = 0: no muscle energy
+    return solve(sp, b, p=p)
 
 
 def example_of(target: Motion, footsteps: tuple[Footstep, ...], fps: float = 60.0) -> ExamplePoses:

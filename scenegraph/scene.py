@@ -35,7 +35,7 @@ from .gait import initial_motion
 from .ground import FLAT, Ground, ground_from_environment
 from .kinematics import handle_positions_fn, numeric_fk
 from .motion import Motion
-from .spacetime import Avoid, HandleTarget, Spring
+from .problem import Avoid, HandleTarget, Spring
 from .style import Style, default_style, load_style
 
 __all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets",

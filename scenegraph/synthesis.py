@@ -13,7 +13,7 @@ from .body import Character
 from .footsteps import Footstep
 from .gait import initial_motion
 from .motion import Motion
-from .spacetime import Result, Subproblem, solve
+from .problem import Result, Subproblem, solve
 from .style import Style
 
 __all__ = ["Synthesis", "synthesize", "presolve_kinematics"]

@@ -77,7 +77,7 @@ def _steps_on_motion(ch, motion, steps):
     from dataclasses import replace
 
     from scenegraph.footsteps import contact_points
-    from scenegraph.spacetime import handles_kernel
+    from scenegraph.residual import handles_kernel
 
     out = []
     for st in steps:

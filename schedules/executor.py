@@ -44,7 +44,7 @@ from scenarios.errors import ComposeError, InputError
 from scenegraph.footsteps import Footstep
 from scenegraph.motion import Motion
 from scenegraph.scene import START_WEIGHT, Scene, coupling_springs, coupling_targets, goal_targets, handle_track
-from scenegraph.spacetime import HandleTarget, Subproblem, _window_mask, solve
+from scenegraph.problem import HandleTarget, Subproblem, solve, window_mask
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
 
@@ -212,7 +212,7 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
                     # a dense grid too, as synthesize does for runs — between the 30 Hz points a
                     # toe dipped 11–15 mm (audit gate 10 mm)
                     soft_ground_hz=SOFT_PIN_HZ if step.kind == FULL and step.role == "horizon" else 0.0)
-    mask = None if whole else _window_mask(sp, m.n_ctrl)
+    mask = None if whole else window_mask(sp, m.n_ctrl)
     return sp, mask
 
 

@@ -10,7 +10,7 @@ from scenegraph.gait import initial_motion
 from scenegraph.joint import JointCoupling, coupling_times, solve_joint
 from scenegraph.kinematics import handle_positions_fn
 from scenegraph.scene import _foot_length, standing_footsteps
-from scenegraph.spacetime import HandleTarget, Subproblem
+from scenegraph.problem import HandleTarget, Subproblem
 from scenegraph.style import default_style
 from scenegraph.synthesis import presolve_kinematics
 

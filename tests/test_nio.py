@@ -334,7 +334,7 @@ def synthetic_recovery(hessian: str = "gauss_newton", local: bool = True, max_it
     solve (X_T's pipeline, the re-syntheses; NIO's local counterexample is a Gauss–Newton step
     either way); prints and returns its numbers."""
     from scenegraph.footsteps import footsteps_for_walk
-    from scenegraph.spacetime import Subproblem, solve
+    from scenegraph.problem import Subproblem, solve
     from scenegraph.synthesis import synthesize
 
     ch = make_character("adult_male")

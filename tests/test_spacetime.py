@@ -7,7 +7,7 @@ import pytest
 from scenegraph.body import make_character
 from scenegraph.footsteps import footsteps_for_walk
 from scenegraph.gait import initial_motion
-from scenegraph.spacetime import Subproblem, solve
+from scenegraph.problem import Subproblem, solve
 from scenegraph.style import default_style
 from scenegraph.synthesis import presolve_kinematics, synthesize
 
@@ -116,7 +116,7 @@ def test_spring_force_enters_the_dynamics():
     audit balances the equations of motion only when that force is counted."""
     from scenegraph.audit import audit_motion
     from scenegraph.kinematics import handle_positions_fn
-    from scenegraph.spacetime import Spring
+    from scenegraph.problem import Spring
 
     steps = footsteps_for_walk()
     t0, t1 = steps[1].t0, steps[-1].t0
@@ -160,10 +160,10 @@ def _hessian_check(b, x, n_dirs=3, h=1e-5):
     random directions against central differences of the objective's AD gradient."""
     import casadi as ca
 
-    Hu = np.asarray(ca.DM(b.hess_fn(x, b.p, 1.0, np.zeros(b.lbg.size))).full())
+    Hu = np.asarray(ca.DM(b.hess_lag(x, b.p0, 1.0, np.zeros(b.lbg.size))).full())
     H = Hu + np.triu(Hu, 1).T
     xs = ca.MX.sym("x", x.size)
-    grad = ca.Function("grad_f", [xs], [ca.gradient(b.f_fn(xs, b.p), xs)])
+    grad = ca.Function("grad_f", [xs], [ca.gradient(b.f_fn(xs, b.p0), xs)])
     rng = np.random.default_rng(3)
     errs = []
     for _ in range(n_dirs):
@@ -179,16 +179,16 @@ def test_exact_hessian_matches_finite_differences(small_window):
     dynamics kernel and of the soft springs included); the Gauss–Newton one measurably is not.
     The style has no smooth-step kinks (ks2 = ks1, no shoe spring), whose curvature the exact
     mode holds out on purpose (kernel_hessian)."""
-    from scenegraph.spacetime import build
+    from scenegraph.problem import transcribe
 
     steps, m0, window = small_window
     smooth = STYLE.with_(ks2=STYLE.ks1, k_shoe=0.0)
     errs = {}
     for mode in ("exact", "gauss_newton"):
-        b = build(Subproblem(CH, smooth, m0, steps, window=window, free=frozenset({"q"}), soft_pin_hz=120.0,
+        b = transcribe(Subproblem(CH, smooth, m0, steps, window=window, free=frozenset({"q"}), soft_pin_hz=120.0,
                              hessian=mode))
         x = b.x0 + 1e-3 * np.random.default_rng(0).normal(size=b.x0.size)  # off the initial guess
-        x[b.lam_slice] = np.abs(x[b.lam_slice])
+        x[b.x_layout["lambda"]] = np.abs(x[b.x_layout["lambda"]])
         errs[mode] = _hessian_check(b, x)
     assert errs["exact"] < 1e-6, errs
     assert errs["gauss_newton"] > 1e-5, errs  # the check can tell the two apart
@@ -210,8 +210,37 @@ def test_exact_hessian_solves_a_window():
 
 
 def test_unknown_hessian_mode_is_rejected(small_window):
-    from scenegraph.spacetime import build
+    from scenegraph.problem import transcribe
 
     steps, m0, window = small_window
     with pytest.raises(ValueError, match="hessian"):
-        build(Subproblem(CH, STYLE, m0, steps, window=window, hessian="newton"))
+        transcribe(Subproblem(CH, STYLE, m0, steps, window=window, hessian="newton"))
+
+
+def test_named_layout_and_solve_timing(small_window):
+    """The NLP names its x/p slices (NIO and the joint problem substitute parameters by name),
+    and a solve reports where its wall time went."""
+    from scenegraph.problem import make_solver, transcribe
+    from scenegraph.residual import theta_kernel_vector
+
+    steps, m0, window = small_window
+    nlp = transcribe(Subproblem(CH, STYLE, m0, steps, window=window, free=frozenset({"q"}), max_iter=3,
+                                stall_iterations=2))
+    for layout, n in ((nlp.x_layout, nlp.x0.size), (nlp.p_layout, nlp.p0.size)):
+        sl = list(layout.values())
+        assert sl[0].start == 0 and sl[-1].stop == n
+        assert all(a.stop == b.start for a, b in zip(sl, sl[1:]))
+    N = len(nlp.s_points)
+    np.testing.assert_array_equal(nlp.p0[nlp.p_layout["ctrl_fixed"]], np.asarray(m0.ctrl, float).ravel())
+    np.testing.assert_array_equal(nlp.p0[nlp.p_layout["theta"]].reshape(-1, N, order="F")[:, 0],
+                                  theta_kernel_vector(STYLE))
+    np.testing.assert_allclose(nlp.p0[nlp.p_layout["sqrt_alpha"]].reshape(-1, N, order="F")[:, -1],
+                               np.sqrt(STYLE.alpha))
+    assert nlp.x_layout["lambda"].stop - nlp.x_layout["lambda"].start == 4 * len(nlp.contact_index)
+
+    res = solve(nlp.sp, make_solver(nlp))
+    t = res.timing
+    assert t.build == 0.0 and min(t.as_dict().values()) >= 0.0
+    assert t.hess > 0.0 and t.callbacks > 0.0 and t.total == res.seconds
+    parts = t.f + t.grad_f + t.g + t.jac_g + t.hess + t.callbacks + t.linear_solver_and_ipopt
+    assert parts <= t.total + 1e-6

@@ -5,7 +5,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from scenegraph.spacetime import StallMonitor
+from scenegraph.problem import StallMonitor
 
 
 def _arg(x, f, g):

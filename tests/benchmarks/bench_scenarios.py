@@ -63,7 +63,7 @@ def monolithic(max_iter: int) -> dict:
     from scenegraph.audit import audit_motion
     from scenegraph.joint import JointCoupling, coupling_times, solve_joint
     from scenegraph.scene import build_scene
-    from scenegraph.spacetime import compiled_kernel
+    from scenegraph.residual import compiled_kernel
     from schedules.cli_run import AUDIT_TOLERANCES, goal_report
     from schedules.compiler import compile_schedule
     from schedules.executor import _subproblem, presolve_character

@@ -13,7 +13,7 @@ import time
 
 from scenegraph.body import make_character
 from scenegraph.footsteps import footsteps_for_walk
-from scenegraph.spacetime import compiled_kernel, kernel_hessian
+from scenegraph.residual import compiled_kernel, kernel_hessian
 from scenegraph.style import default_style
 from scenegraph.synthesis import synthesize
 

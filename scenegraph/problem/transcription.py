@@ -1,4 +1,8 @@
-"""One spacetime subproblem (a Step's unit of work): problem, transcription, solve, result.
+"""Transcription of one subproblem into an NLP: :func:`transcribe` (``Subproblem`` → :class:`NLP`).
+
+The NLP is handed to IPOPT by :mod:`.solver`; nothing here creates a solver.  Units: world
+times in s, positions in m (z up), forces in N; the objective is normalised by
+(OBJ_SCALE / m g)² (residuals in units of body weight).
 
 Transcription
 -------------
@@ -13,7 +17,7 @@ is a sum of squares of residuals computed by one per-point kernel (inverse dynam
 passive, contact and shoe terms) that is compiled to C with its first derivatives.
 IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals) plus the exact Hessian of
 the kinematic constraints by default; ``Subproblem(hessian="exact")`` adds the residual
-curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`kernel_hessian`, chained
+curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`~scenegraph.residual.kernel_hessian`, chained
 through the splines; see README "Exact Hessian" for what it measured).  Style θ and all
 fixed data are NLP parameters, so one built problem serves many solves (NIO).
 
@@ -22,249 +26,85 @@ non-penetration of the foot handles, feet not crossing (thesis Eq. 6.3), joint l
 (bounds on control points: a B-spline stays in the hull of its control points), monotone
 timewarp (Eq. 6.1), optional boundary states and avoid-spheres; soft springs toward
 handle targets and poses (continuations).
+
+Layout
+------
+x = [ctrl (free control points, row-major (K, 35) entries) | warp (free timewarp control
+points, s) | footprints (x, y per free footstep, m) | lambda (4 per planted (handle, point))];
+p = [ctrl_fixed (all K·35 control points) | warp_fixed (nW) | anchors (3 × N per spring,
+column-major, m) | theta (N_THETA × N, column-major) | sqrt_alpha (29 × N, column-major)].
+:attr:`NLP.x_layout` and :attr:`NLP.p_layout` name these slices, so callers (NIO, the joint
+problem) substitute parameters by name instead of by offset arithmetic.
 """
 from __future__ import annotations
 
-import functools
-import os as _os
-import time as _time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from .body import G, N_DOF, N_JOINT, N_ROOT, Character
-from .dynamics import friction_basis, muscle_and_residual
-from .footsteps import Footstep, contact_points
-from .ground import FLAT, Ground
-from .kinematics import frame_transforms, handle_position
-from .motion import Motion, basis
-from .style import Style
+from ..body import G, N_DOF, N_JOINT, N_ROOT, Character
+from ..footsteps import Footstep, contact_points
+from ..motion import basis
+from ..residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
+                        kernel_hessian, theta_kernel_vector)
+from .subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["read_solution", "Subproblem", "HandleTarget", "PoseTarget", "Avoid", "Spring", "Result", "solve", "build",
-           "CONTACT_HANDLES", "residual_kernel", "W_ROOT"]
+__all__ = ["NLP", "transcribe", "window_mask", "OBJ_SCALE", "KIN_WEIGHT", "FREE_WEIGHT_MIN"]
 
-W_ROOT = 100.0  # paper: weight of the root residual
 OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
 KIN_WEIGHT = 3.0  # pull toward the initial motion in kinematic pre-solves
-CONTACT_HANDLES = ("heel_l", "ball_l", "toe_l", "heel_r", "ball_r", "toe_r")
-FORCE_HANDLES = CONTACT_HANDLES + ("palm_l", "palm_r")
-N_THETA = 4 * N_JOINT + 2  # style numbers the kernel needs: ks1, ks2, kd, q_rest, k_shoe, h_rest
+FREE_WEIGHT_MIN = 0.05  # B-spline weight of the free control points below which a point counts as held
 
 
-@dataclass(frozen=True)
-class HandleTarget:
-    """Soft spring pulling ``handle`` toward ``point`` (world, m) at world time ``t``.
+@dataclass(frozen=True, kw_only=True)
+class NLP:
+    """A transcribed subproblem: min f(x, p) s.t. lbg ≤ g(x, p) ≤ ubg, lbx ≤ x ≤ ubx.
 
-    ``weight`` is in 1/m² of the normalised objective; ``hard`` makes it an equality.
+    Symbols and expressions (MX) for the solver, numeric data (bounds, start ``x0``, the
+    parameter values ``p0`` of ``sp``), the named layout of x and p, and what is needed to
+    read a solution (:func:`.result.read_solution`) or to combine several NLPs into one
+    (``scenegraph/joint.py``).
     """
 
-    handle: str
-    t: float
-    point: tuple[float, float, float]
-    weight: float = 10.0
-    hard: bool = False
-    name: str = "target"
+    sp: Subproblem
+    x: ca.MX  # decision variables (see x_layout)
+    p: ca.MX  # parameters (see p_layout)
+    f: ca.MX  # objective of (x, p) = |rho_dyn|² + |rho_extra|²
+    g: ca.MX  # constraints of (x, p)
+    x0: np.ndarray  # start (warm start from sp.motion)
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    p0: np.ndarray  # parameter values of sp (callers may solve with others, e.g. NIO's θ)
+    x_layout: dict[str, slice]  # "ctrl", "warp", "footprints", "lambda" → slice into x
+    p_layout: dict[str, slice]  # "ctrl_fixed", "warp_fixed", "anchors", "theta", "sqrt_alpha" → slice into p
+    anchor_slices: tuple[slice, ...]  # slice into p of each spring's anchor (3 × N at s_points, column-major)
+    f_fn: ca.Function  # x, p -> objective (IPOPT's f)
+    g_fn: ca.Function  # x, p -> constraints
+    hess_lag: ca.Function  # x, p, lam_f, lam_g -> upper triangle of the Lagrangian Hessian given to IPOPT
+    jac_g: ca.Function  # x, p -> (g, ∂g/∂x) given to IPOPT (SX)
+    unpack: ca.Function  # x, p -> ctrl, warp, foot xy, energy terms, spring forces
+    groups: list  # (name, slice into g, kind)
+    s_points: np.ndarray  # collocation points (canonical time s)
+    contact_index: list  # (handle, k, slice into x) of each planted (handle, collocation point)
+    free_steps: list  # indices into sp.footsteps of the free footprints, in x order
+    contact_basis: tuple = ()  # friction pyramid V (3×4, world) per contact_index entry
+    spring_handles: tuple = ()  # handle of each Subproblem.springs entry, in order
+    # the transcription's pieces, for problems that combine several NLPs (scenegraph/joint.py):
+    rho_dyn_fn: ca.Function | None = None  # x, p -> dynamics residuals (objective = |rho_dyn|² + |rho_extra|²)
+    rho_extra_fn: ca.Function | None = None  # x, p -> the other least-squares residuals (SX-expandable)
+    ctrl_fn: ca.Function | None = None  # x, p -> control points (K × 35)
 
 
-@dataclass(frozen=True)
-class PoseTarget:
-    """Soft spring toward a full pose ``q`` (35) at world time ``t`` (continuations, seams)."""
-
-    t: float
-    q: tuple[float, ...]
-    weight: float = 1.0
-    velocity: tuple[float, ...] | None = None
-
-
-@dataclass(frozen=True)
-class Spring:
-    """A physical spring on ``handle``: force stiffness · (anchor(t) − handle position) (N, world).
-
-    ``times`` (s, world, increasing) and ``points`` (n × 3, m) sample the anchor's path — a
-    partner's held handle in a rubber-band coupling (thesis §6.4.3); it is interpolated
-    linearly at the collocation times, and the force acts only within [times[0], times[-1]].
-    The force enters the equations of motion at the handle (one of FORCE_HANDLES).
-    """
-
-    handle: str
-    times: tuple[float, ...]
-    points: tuple[tuple[float, float, float], ...]
-    stiffness: float  # N/m
-    name: str = "spring"
-
-
-@dataclass(frozen=True)
-class Avoid:
-    """Keep ``handle`` outside a sphere (center world m, radius m) at world time ``t``."""
-
-    handle: str
-    t: float
-    center: tuple[float, float, float]
-    radius: float
-
-
-@dataclass(frozen=True)
-class Subproblem:
-    """What one Step solves for one character.  Times are world times of ``motion``.
-
-    ``window`` (t0, t1): control points whose support lies inside are free; the others are
-    held, which gives the boundary conditions of a window.  ``free`` names the free blocks:
-    "q" (spline control points), "warp", "footprints" (positions of footsteps with
-    ``free=True``); λ is always free where a handle is planted.  ``dynamics`` is "full"
-    (energy with w_r) or "relaxed" (root residual weight divided by 100: timing steps).
-    ``cyclic`` makes the motion end in the state it began (velocities too), moved along
-    the ground (root x, y free).  "kinematic" drops the dynamics and stays near the initial motion (a kinematic
-    pre-solve that makes the initial guess satisfy the constraints).  ``style_end`` blends θ linearly over the window toward another style (transitions).
-    """
-
-    character: Character
-    style: Style
-    motion: Motion
-    footsteps: tuple[Footstep, ...] = ()
-    window: tuple[float, float] | None = None
-    free: frozenset = frozenset({"q", "warp"})
-    dynamics: str = "full"
-    targets: tuple[HandleTarget, ...] = ()
-    poses: tuple[PoseTarget, ...] = ()
-    avoid: tuple[Avoid, ...] = ()
-    springs: tuple[Spring, ...] = ()
-    style_end: Style | None = None
-    collocation_hz: float = 30.0  # dynamics (energy, contact forces)
-    constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
-    ground_hz: float = 0.0  # extra grid for non-penetration (0: the constraint grid; denser grids
-    # were measured to stall IPOPT: 300 iterations without convergence at 90 Hz)
-    soft_pin_hz: float = 0.0  # soft footprint springs between the hard points (0: off; see README)
-    soft_pin_weight: float = 1e5  # total weight, shared by the soft points
-    soft_ground_hz: float = 0.0  # one-sided ground penalty on a dense grid (0: off)
-    soft_ground_weight: float = 1e6  # total weight, shared by the dense points
-    fix_start_time: bool = True
-    fix_end_time: bool = True
-    cyclic: bool = False
-    contact_guess: dict | None = field(default=None, compare=False, hash=False)  # warm start for λ
-    min_foot_separation: float = 0.06
-    ground: Ground = FLAT  # terrain: footprint heights, non-penetration, friction pyramids (ground.py)
-    max_iter: int = 300
-    tol: float = 1e-4
-    label: str = "step"
-    ipopt_options: tuple = ()  # extra IPOPT options as (name, value) pairs (e.g. warm starts in NIO)
-    nlpsol_options: tuple = ()  # extra CasADi nlpsol options as (name, value) pairs (e.g. iteration_callback)
-    stall_iterations: int = 0  # > 0: stop as "Stalled" (a success) when the best feasible objective has
-    # improved by less than STALL_RATE per iterate over this many feasible iterates (see StallMonitor)
-    hessian: str = "gauss_newton"  # Hessian of the objective given to IPOPT: "gauss_newton" (2 JᵀJ) or
-    # "exact" (adds 2 Σ r ∇²r: the compiled kernel Hessian chained through the splines; see build);
-    # "gauss_newton_objective" (an experiment: 2 JᵀJ without the constraints' curvature; README)
-
-
-@dataclass
-class Result:
-    """Outcome of one solve."""
-
-    motion: Motion
-    footsteps: tuple[Footstep, ...]
-    status: str
-    success: bool
-    iterations: int
-    seconds: float
-    energy: float
-    objective: float
-    violations: dict[str, float]
-    contact_forces: dict = field(default_factory=dict)  # handle -> (times, forces (n,3))
-    label: str = "step"
-
-    def summary(self) -> str:
-        worst = max(self.violations.items(), key=lambda kv: kv[1], default=("none", 0.0))
-        return (f"{self.label}: {self.status} in {self.iterations} it, {self.seconds:.2f} s, "
-                f"E={self.energy:.4g}, worst violation {worst[0]}={worst[1]:.2e}")
-
-
-# --- the per-point kernel -------------------------------------------------------------------
-
-def _kernel_expr(ch: Character, q, qd, qdd, fc, th):
-    """[Q_m (29); Q_0 (6)] as SX of the kernel's symbols (see residual_kernel)."""
-    class _S:  # the style numbers the dynamics need
-        ks1, ks2, kd, q_rest = (th[i * N_JOINT:(i + 1) * N_JOINT] for i in range(4))
-        k_shoe, h_rest = th[4 * N_JOINT], th[4 * N_JOINT + 1]
-
-    ext = []
-    for i, name in enumerate(FORCE_HANDLES):
-        h = ch.handle(name)
-        ext.append((ch.body(h.body).frame, h.point, fc[3 * i:3 * i + 3]))
-    qm, q0 = muscle_and_residual(ch, q, qd, qdd, _S, ext)
-    return ca.vertcat(qm, q0)
-
-
-@functools.lru_cache(maxsize=8)
-def residual_kernel(ch: Character) -> ca.Function:
-    """(q, q̇, q̈ (35 each), forces at FORCE_HANDLES (3·8, world N), θ (118)) → [Q_m (29); Q_0 (6)]."""
-    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
-    fc = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
-    th = ca.SX.sym("theta", N_THETA)
-    return ca.Function("compose_residual", [q, qd, qdd, fc, th], [_kernel_expr(ch, q, qd, qdd, fc, th)],
-                       ["q", "qd", "qdd", "f", "theta"], ["Q"])
-
-
-@functools.lru_cache(maxsize=8)
-def compiled_kernel(ch: Character) -> ca.Function:
-    from .codegen import compiled
-    return compiled(residual_kernel(ch), with_jacobian=True)
-
-
-@functools.lru_cache(maxsize=8)
-def kernel_hessian(ch: Character, compile: bool = True) -> ca.Function:
-    """(q, q̇, q̈, forces, θ, w (35)) → ∇²_z (w · Q(z)) (129×129, z = (q, q̇, q̈, forces)).
-
-    The second-order term of the exact Hessian of a weighted sum of squares Σ w_i Q_i, with
-    one exception: the paper's smooth steps g(x) = (tanh(500 x) + 1)/2 that blend the passive
-    springs (ks1/ks2) and switch the shoe spring are held at their values when differentiating
-    twice (their first derivatives stay in the gradient).  Their own curvature is a spike of
-    ~500² at the kink (a heel at its 5 mm rest height, a joint at q̄): with it IPOPT's inertia
-    correction reached 1e10–1e17 and stopped with "Error in step computation" (measured).  Away
-    from the kinks (|x| ≫ 2 mm) this is the exact Hessian.  The kernel is linear in q̈ and in
-    the forces, so only (q, q̇) rows and columns are non-zero (3319 entries; ~140 k SX
-    instructions, compiled at -O1 in ~20 s once)."""
-    from . import dynamics as dyn
-
-    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
-    fc = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
-    th = ca.SX.sym("theta", N_THETA)
-    w = ca.SX.sym("w", N_DOF)
-    held, smooth_step = [], dyn.sigmoid
-
-    def held_step(x):  # a symbol in place of g(x): differentiated as a constant
-        g = ca.SX.sym(f"g{len(held)}", x.shape)
-        held.append((g, smooth_step(x)))
-        return g
-
-    dyn.sigmoid = held_step
-    try:
-        Q = _kernel_expr(ch, q, qd, qdd, fc, th)
-    finally:
-        dyn.sigmoid = smooth_step
-    z = ca.vertcat(q, qd, qdd, fc)
-    H, _ = ca.hessian(ca.dot(w, Q), z)
-    if held:
-        H = ca.substitute(H, ca.vertcat(*[g for g, _ in held]), ca.vertcat(*[v for _, v in held]))
-    f = ca.Function("compose_residual_hess", [q, qd, qdd, fc, th, w], [H],
-                    ["q", "qd", "qdd", "f", "theta", "w"], ["H"])
-    if not compile:
-        return f
-    from .codegen import compiled
-    return compiled(f)
-
-
-HESSIAN_MODES = ("gauss_newton", "exact", "gauss_newton_objective")
-
-
-@functools.lru_cache(maxsize=8)
-def handles_kernel(ch: Character, names: tuple[str, ...]) -> ca.Function:
-    q = ca.SX.sym("q", N_DOF)
-    tr = frame_transforms(ch, q)
-    return ca.Function("handles", [q], [ca.vertcat(*[handle_position(ch, q, n, tr) for n in names])])
-
-
-def theta_kernel_vector(style: Style) -> np.ndarray:
-    return np.concatenate([style.ks1, style.ks2, style.kd, style.q_rest, [style.k_shoe, style.h_rest]])
+def _layout(*sizes: tuple[str, int]) -> dict[str, slice]:
+    """Consecutive named slices of the given sizes."""
+    out, n = {}, 0
+    for name, size in sizes:
+        out[name] = slice(n, n + int(size))
+        n += int(size)
+    return out
 
 
 def _sparse(a: np.ndarray) -> ca.DM:
@@ -274,115 +114,7 @@ def _sparse(a: np.ndarray) -> ca.DM:
     return ca.sparsify(ca.DM(a))
 
 
-# --- transcription --------------------------------------------------------------------------
-
-@dataclass
-class Built:
-    """A transcribed problem: the IPOPT solver and what is needed to read its solution."""
-
-    sp: Subproblem
-    solver: ca.Function
-    x0: np.ndarray
-    lbx: np.ndarray
-    ubx: np.ndarray
-    lbg: np.ndarray
-    ubg: np.ndarray
-    p: np.ndarray
-    unpack: ca.Function  # x, p -> ctrl, warp, foot xy, energy terms
-    groups: list  # (name, slice into g, kind)
-    s_points: np.ndarray
-    contact_index: list  # (handle, k, slice into λ)
-    lam_slice: slice
-    free_steps: list
-    g_fn: ca.Function
-    contact_basis: tuple = ()  # friction pyramid V (3×4, world) per contact_index entry
-    spring_handles: tuple = ()  # handle of each Subproblem.springs entry, in order
-    monitor: object = None  # StallMonitor when Subproblem.stall_iterations > 0
-    f_fn: ca.Function | None = None  # x, p -> objective (IPOPT's f)
-    hess_fn: ca.Function | None = None  # x, p, lam_f, lam_g -> upper triangle of the Lagrangian Hessian given to IPOPT
-    # the transcription's pieces, for problems that combine several Built (scenegraph/joint.py):
-    rho_dyn_fn: ca.Function | None = None  # x, p -> dynamics residuals (objective = |rho_dyn|² + |rho_extra|²)
-    rho_extra_fn: ca.Function | None = None  # x, p -> the other least-squares residuals (SX-expandable)
-    ctrl_fn: ca.Function | None = None  # x, p -> control points (K × 35)
-    anchor_slices: tuple = ()  # slice into p of each spring's anchor (3 × N at s_points, column-major)
-
-
-STALL_RATE = 1e-3  # mean relative gain per feasible iterate, over the last `patience`, that counts as
-# progress: Gauss–Newton creeps on large-residual windows (a walk_to_run window: −26 % of its
-# objective over its last 270 of 300 iterations, 0.1 % per iterate); below this it stops
-STALL_VIOL = 1e-5  # worst constraint violation (m, or the constraint's unit) of a stalled iterate
-
-
-class IterationCallback(ca.Callback):
-    """Base of IPOPT iteration callbacks: receives nlpsol's outputs (x, f, g, multipliers) of
-    an NLP with ``nx`` variables and ``ng`` constraints; subclasses implement ``eval`` and
-    read ``violation(g)`` (worst violation of [lbg, ubg])."""
-
-    def __init__(self, name: str, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray):
-        ca.Callback.__init__(self)
-        self.nx, self.ng, self.lbg, self.ubg = nx, ng, np.asarray(lbg, float), np.asarray(ubg, float)
-        self.construct(name, {})
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "ret"
-
-    def get_sparsity_in(self, i):
-        size = {"f": (1, 1), "g": (self.ng, 1), "lam_g": (self.ng, 1), "p": (0, 0), "lam_p": (0, 0)}
-        return ca.Sparsity.dense(*size.get(ca.nlpsol_out(i), (self.nx, 1)))
-
-    def violation(self, g) -> float:
-        g = np.asarray(g).ravel()
-        return float(np.max(np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0), initial=0.0))
-
-
-class StallMonitor(IterationCallback):
-    """IPOPT iteration callback: stop once the best feasible objective (every constraint held
-    to STALL_VIOL) has improved by less than STALL_RATE (relative) per iterate on average over
-    the last ``patience`` feasible iterates (infeasible iterates are not counted).
-
-    Windows whose held boundary leaves residuals that cannot vanish are large-residual least
-    squares; there the Gauss–Newton Hessian converges only linearly, and IPOPT can spend
-    hundreds of iterations on the last digits of a flat objective.  ``stalled`` records why
-    the solve stopped; ``best_x`` is the best feasible iterate, which :func:`solve` returns
-    when IPOPT ends somewhere worse (warm-started from a good motion, IPOPT's first barrier
-    iterations can leave it and stall at a higher energy: a seam window started at E ≈ 1.4e3
-    stalled at 1.1e4).
-    """
-
-    def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray, patience: int):
-        self.patience = patience
-        self.reset()
-        super().__init__("stall_monitor", nx, ng, lbg, ubg)
-
-    def reset(self) -> None:
-        self.best, self.stalled, self.best_x = np.inf, False, None
-        self.trace: list[float] = []  # best feasible objective after each feasible iterate
-
-    def eval(self, arg):
-        f = float(arg[ca.nlpsol_out().index("f")])
-        if self.violation(arg[ca.nlpsol_out().index("g")]) > STALL_VIOL:
-            return [0]  # not counted (restarting the count let a blip every ~25 iterates run a solve to its cap)
-        if f < self.best:
-            self.best, self.best_x = f, np.array(arg[ca.nlpsol_out().index("x")], float).ravel()
-        self.trace.append(self.best)
-        if len(self.trace) > self.patience:
-            gained = self.trace[-1 - self.patience] - self.best
-            if gained <= STALL_RATE * self.patience * max(1e-9, abs(self.best)):
-                self.stalled = True
-                return [1]
-        return [0]
-
-
-def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
+def window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     """Control points free under the window: those whose support lies inside it, so a
     windowed solve never changes the motion (or invalidates contact forces) outside its
     window; the points straddling two windows are freed by the seam window between them."""
@@ -396,9 +128,6 @@ def _window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
         hi = knots[min(len(knots) - 1, i + 1)] if i + 1 < len(knots) else 1.0
         mask[i] = (lo >= s0 - 1e-9) and (hi <= s1 + 1e-9)
     return mask
-
-
-FREE_WEIGHT_MIN = 0.05  # B-spline weight of the free control points below which a point counts as held
 
 
 def _depends_on_free(n_ctrl: int, s: float, mask: np.ndarray, other_free: bool) -> bool:
@@ -485,7 +214,9 @@ def _drop_cyclic_duplicates(pins: list) -> list:
     return [pn for pn in pins if pn not in repeated] + [(h, v, xy, "xy")]
 
 
-def build(sp: Subproblem) -> Built:
+
+def transcribe(sp: Subproblem) -> NLP:
+    """The NLP of ``sp`` (see the module docstring); the solver is created by ``solver.make_solver``."""
     ch, m = sp.character, sp.motion
     K, nW = m.n_ctrl, len(m.warp)
     mg = ch.total_mass * G
@@ -500,7 +231,7 @@ def build(sp: Subproblem) -> Built:
     t_init = m.time(s)
 
     # free / fixed control points
-    mask = _window_mask(sp, K) if "q" in sp.free else np.zeros(K, bool)
+    mask = window_mask(sp, K) if "q" in sp.free else np.zeros(K, bool)
     free_idx = np.flatnonzero(np.repeat(mask[:, None], N_DOF, axis=1).ravel())
     xP = ca.MX.sym("P", len(free_idx))
     P_fixed = ca.MX.sym("P_fixed", K * N_DOF)  # parameter: current control points
@@ -651,7 +382,6 @@ def build(sp: Subproblem) -> Built:
                  - ca.vertcat(pn[2][0], pn[2][1], sp.ground.z(pn[2][0], pn[2][1])))
             rows.append(d[:2] if len(pn) > 3 else d)  # "xy": the height is implied (cyclic end)
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
-    # ground non-penetration of every foot handle at every point
     if sp.soft_pin_hz > 0 and pins:
         # soft footprints between the hard points: least squares (Gauss–Newton friendly),
         # keeps planted feet still between collocation points without degenerate constraints
@@ -677,6 +407,7 @@ def build(sp: Subproblem) -> Built:
             depth = ca.vertcat(*[ca.fmin(HPg[3 * hk_names.index(h) + 2, :] - sp.ground.z(
                 HPg[3 * hk_names.index(h), :], HPg[3 * hk_names.index(h) + 1, :]), 0.0) for h in CONTACT_HANDLES])
             rho_extra.append(np.sqrt(sp.soft_ground_weight / depth.shape[0]) * depth)
+    # ground non-penetration of every foot handle at every point
     s_gnd = s_con if sp.ground_hz <= 0 else \
         np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])
     s_gnd = np.array([v for v in s_gnd if _depends_on_free(K, v, mask, warp_free)
@@ -776,20 +507,6 @@ def build(sp: Subproblem) -> Built:
     hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
     jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
-    opts = {
-        "hess_lag": hess, "jac_g": jac_g, "print_time": False,
-        "ipopt": {"print_level": int(_os.environ.get("COMPOSE_IPOPT_PRINT", "0")), "max_iter": sp.max_iter, "tol": sp.tol, "acceptable_tol": 1e-4,
-                  "acceptable_iter": 5, "mu_strategy": "adaptive", "linear_solver": "mumps", "sb": "yes"},
-    }
-    opts["ipopt"].update(dict(sp.ipopt_options))
-    opts.update(dict(sp.nlpsol_options))
-    monitor = None
-    if sp.stall_iterations > 0:
-        monitor = StallMonitor(x.shape[0], gg.shape[0], np.asarray(lbg, float), np.asarray(ubg, float),
-                               sp.stall_iterations)
-        opts["iteration_callback"] = monitor
-    solver = ca.nlpsol("spacetime", "ipopt", {"x": x, "p": p, "f": f, "g": gg}, opts)
-
     th = theta_kernel_vector(sp.style)
     sa = np.sqrt(np.asarray(sp.style.alpha, float))
     if sp.style_end is not None:
@@ -805,85 +522,22 @@ def build(sp: Subproblem) -> Built:
 
     springs_out = ca.vertcat(*spring_force) if spring_force else ca.MX(0, N)
     unpack = ca.Function("unpack", [x, p], [P, warp, xF, energy, root_energy, springs_out])
-    return Built(sp, solver, np.concatenate([np.ravel(a) for a in x0]),
-                 np.concatenate([np.ravel(a) for a in lbx]), np.concatenate([np.ravel(a) for a in ubx]),
-                 np.asarray(lbg, float), np.asarray(ubg, float), pv, unpack, groups, s,
-                 [(h, k, slice(xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c,
-                               xP.shape[0] + xW.shape[0] + xF.shape[0] + 4 * c + 4))
-                  for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
-                 slice(xP.shape[0] + xW.shape[0] + xF.shape[0], x.shape[0]), free_steps,
-                 ca.Function("g", [x, p], [gg]), tuple(Vc), tuple(sg.handle for sg in sp.springs), monitor,
-                 ca.Function("f", [x, p], [f]), hess,
-                 ca.Function("rho_dyn", [x, p], [rho_dyn]), ca.Function("rho_extra", [x, p], [rho_x]),
-                 ca.Function("ctrl", [x, p], [P]),
-                 tuple(slice(n_fixed + 3 * N * j, n_fixed + 3 * N * (j + 1)) for j in range(len(sp.springs))))
-
-
-def violations(b: Built, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:
-    """Worst violation per constraint group (m for positions; 0 when satisfied)."""
-    gv = np.asarray(b.g_fn(x, b.p if p is None else p)).ravel()
-    out = {}
-    for name, sl, _ in b.groups:
-        lo, hi, v = b.lbg[sl], b.ubg[sl], gv[sl]
-        viol = np.maximum(np.maximum(lo - v, v - hi), 0.0)
-        key = name.split(":")[0] if name.startswith("target") else name
-        out[key] = max(out.get(key, 0.0), float(viol.max()) if viol.size else 0.0)
-    return out
-
-
-def read_solution(b: Built, x: np.ndarray, p: np.ndarray) -> tuple[Motion, tuple, float, dict]:
-    """(motion, footsteps, energy, forces) of a solution vector ``x`` of ``b`` with parameters
-    ``p``; forces: handle → (world times s, forces N (n, 3)), contact forces from λ plus each
-    spring's force over its interval (external forces at their handle, for the audit)."""
-    sp = b.sp
-    P, W, F, E, _, FS = (np.asarray(v) for v in b.unpack(x, p))
-    F = F.ravel()
-    motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
-    steps = list(sp.footsteps)
-    for j, si in enumerate(b.free_steps):
-        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
-    mg = sp.character.total_mass * G
-    forces: dict = {}
-    for c, (h, k, sl) in enumerate(b.contact_index):
-        V = b.contact_basis[c] if b.contact_basis else friction_basis()
-        forces.setdefault(h, []).append((float(motion.time([b.s_points[k]])[0]), mg * V @ x[sl]))
-    contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
-    t_pts = motion.time(b.s_points)
-    for j, h in enumerate(b.spring_handles):
-        fj = FS[3 * j:3 * j + 3, :].T
-        on = (t_pts >= sp.springs[j].times[0] - 1e-9) & (t_pts <= sp.springs[j].times[-1] + 1e-9)
-        if h in contact:
-            t_old, f_old = contact[h]
-            t_all = np.unique(np.r_[t_old, t_pts[on]])
-            f_all = np.zeros((len(t_all), 3))
-            for tt, ff in zip(t_old, f_old):
-                f_all[np.argmin(np.abs(t_all - tt))] += ff
-            for tt, ff in zip(t_pts[on], fj[on]):
-                f_all[np.argmin(np.abs(t_all - tt))] += ff
-            contact[h] = (t_all, f_all)
-        elif on.any():
-            contact[h] = (t_pts[on], fj[on])
-    return motion, tuple(steps), float(np.ravel(E)[0]), contact
-
-
-def solve(sp: Subproblem, built: Built | None = None, theta_override=None) -> Result:
-    """Build (unless given) and solve a subproblem with IPOPT, warm-started from sp.motion."""
-    t_start = _time.perf_counter()
-    b = built or build(sp)
-    if b.monitor is not None:
-        b.monitor.reset()
-    sol = b.solver(x0=b.x0, lbx=b.lbx, ubx=b.ubx, lbg=b.lbg, ubg=b.ubg, p=b.p)
-    stats = b.solver.stats()
-    x = np.asarray(sol["x"]).ravel()
-    f_final = float(sol["f"])
-    m_ = b.monitor
-    if m_ is not None and m_.best_x is not None and m_.best < f_final - 1e-9 * max(1.0, abs(f_final)):
-        x, f_final = m_.best_x, m_.best  # IPOPT ended worse than a feasible iterate it passed
-    motion, steps, energy, contact = read_solution(b, x, b.p)
-    viol = violations(b, x)
-    status = stats.get("return_status", "unknown")
-    ok = bool(stats.get("success", False)) or status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-    if b.monitor is not None and b.monitor.stalled and status == "User_Requested_Stop":
-        status, ok = "Stalled", True
-    return Result(motion, tuple(steps), status, ok, int(stats.get("iter_count", -1)),
-                  _time.perf_counter() - t_start, energy, f_final, viol, contact, sp.label)
+    x_layout = _layout(("ctrl", xP.shape[0]), ("warp", xW.shape[0]), ("footprints", xF.shape[0]), ("lambda", n_lam))
+    p_layout = _layout(("ctrl_fixed", K * N_DOF), ("warp_fixed", nW), ("anchors", 3 * N * len(sp.springs)),
+                       ("theta", N_THETA * N), ("sqrt_alpha", N_JOINT * N))
+    assert x_layout["lambda"].stop == x.shape[0] and p_layout["sqrt_alpha"].stop == p.shape[0] == pv.size
+    lam0 = x_layout["lambda"].start
+    return NLP(
+        sp=sp, x=x, p=p, f=f, g=gg,
+        x0=np.concatenate([np.ravel(a) for a in x0]),
+        lbx=np.concatenate([np.ravel(a) for a in lbx]), ubx=np.concatenate([np.ravel(a) for a in ubx]),
+        lbg=np.asarray(lbg, float), ubg=np.asarray(ubg, float), p0=pv,
+        x_layout=x_layout, p_layout=p_layout,
+        anchor_slices=tuple(slice(n_fixed + 3 * N * j, n_fixed + 3 * N * (j + 1)) for j in range(len(sp.springs))),
+        f_fn=ca.Function("f", [x, p], [f]), g_fn=ca.Function("g", [x, p], [gg]), hess_lag=hess, jac_g=jac_g,
+        unpack=unpack, groups=groups, s_points=s,
+        contact_index=[(h, k, slice(lam0 + 4 * c, lam0 + 4 * c + 4))
+                       for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
+        free_steps=free_steps, contact_basis=tuple(Vc), spring_handles=tuple(sg.handle for sg in sp.springs),
+        rho_dyn_fn=ca.Function("rho_dyn", [x, p], [rho_dyn]), rho_extra_fn=ca.Function("rho_extra", [x, p], [rho_x]),
+        ctrl_fn=ca.Function("ctrl", [x, p], [P]))

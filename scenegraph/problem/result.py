@@ -1,0 +1,135 @@
+"""The outcome of a solve: :class:`Result`, its :class:`SolveTiming`, and readers of a solution vector.
+
+:func:`read_solution` turns a solution x of an :class:`~.transcription.NLP` into a motion,
+footsteps, the energy (paper Eq. 13: Σ w T' α Q_m², in N² m² s) and the external
+forces (world frame, N, at world times s); :func:`violations` gives the worst violation of each
+constraint group (m for positions, the constraint's own unit otherwise).  Times in
+:class:`SolveTiming` are wall-clock seconds.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from ..body import G
+from ..dynamics import friction_basis
+from ..footsteps import Footstep
+from ..motion import Motion
+from .transcription import NLP
+
+__all__ = ["Result", "SolveTiming", "read_solution", "violations"]
+
+
+@dataclass(frozen=True)
+class SolveTiming:
+    """Where the wall time of one solve went (s).
+
+    ``build``: transcription and nlpsol creation (0 when a built problem was passed in).
+    ``f``, ``grad_f``, ``g``, ``jac_g``, ``hess``: evaluation of the objective, its gradient,
+    the constraints, their Jacobian and the Lagrangian Hessian, as CasADi records them in
+    ``solver.stats()`` (``t_wall_nlp_*``; ``grad_f`` includes ``t_wall_nlp_grad``, the one
+    Lagrangian gradient CasADi evaluates after IPOPT for the multipliers).  ``callbacks``: time
+    inside our Python iteration callbacks (``IterationCallback``).  ``linear_solver_and_ipopt``:
+    IPOPT's own work, dominated by the MUMPS factorisations: the solver's total wall time
+    (``t_wall_total`` when CasADi records it, else the wall time of the solver call) minus all
+    evaluations and callbacks, clipped at 0.  ``total``: the whole solve, build included.
+    """
+
+    build: float = 0.0
+    f: float = 0.0
+    grad_f: float = 0.0
+    g: float = 0.0
+    jac_g: float = 0.0
+    hess: float = 0.0
+    callbacks: float = 0.0
+    linear_solver_and_ipopt: float = 0.0
+    total: float = 0.0
+
+    @classmethod
+    def from_stats(cls, stats: dict, *, build: float, callbacks: float, solver_wall: float,
+                   total: float) -> SolveTiming:
+        """The timing of a solve from CasADi's ``solver.stats()``; ``solver_wall`` is the measured
+        wall time of the solver call (used when the stats carry no ``t_wall_total``)."""
+        def t(key: str) -> float:
+            return float(stats.get(f"t_wall_{key}", 0.0) or 0.0)
+
+        ev = dict(f=t("nlp_f"), grad_f=t("nlp_grad_f") + t("nlp_grad"), g=t("nlp_g"), jac_g=t("nlp_jac_g"),
+                  hess=t("nlp_hess_l"))
+        wall = float(stats["t_wall_total"]) if "t_wall_total" in stats else solver_wall
+        own = max(0.0, wall - sum(ev.values()) - callbacks)
+        return cls(build=build, callbacks=callbacks, linear_solver_and_ipopt=own, total=total, **ev)
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+@dataclass
+class Result:
+    """Outcome of one solve."""
+
+    motion: Motion
+    footsteps: tuple[Footstep, ...]
+    status: str
+    success: bool
+    iterations: int
+    seconds: float
+    energy: float
+    objective: float
+    violations: dict[str, float]
+    contact_forces: dict = field(default_factory=dict)  # handle -> (times, forces (n,3))
+    label: str = "step"
+    timing: SolveTiming | None = None
+
+    def summary(self) -> str:
+        worst = max(self.violations.items(), key=lambda kv: kv[1], default=("none", 0.0))
+        return (f"{self.label}: {self.status} in {self.iterations} it, {self.seconds:.2f} s, "
+                f"E={self.energy:.4g}, worst violation {worst[0]}={worst[1]:.2e}")
+
+
+def violations(nlp: NLP, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:
+    """Worst violation per constraint group (m for positions; 0 when satisfied) of ``x`` with
+    parameters ``p`` (default: the NLP's own ``p0``)."""
+    gv = np.asarray(nlp.g_fn(x, nlp.p0 if p is None else p)).ravel()
+    out = {}
+    for name, sl, _ in nlp.groups:
+        lo, hi, v = nlp.lbg[sl], nlp.ubg[sl], gv[sl]
+        viol = np.maximum(np.maximum(lo - v, v - hi), 0.0)
+        key = name.split(":")[0] if name.startswith("target") else name
+        out[key] = max(out.get(key, 0.0), float(viol.max()) if viol.size else 0.0)
+    return out
+
+
+def read_solution(nlp: NLP, x: np.ndarray, p: np.ndarray) -> tuple[Motion, tuple, float, dict]:
+    """(motion, footsteps, energy, forces) of a solution vector ``x`` of ``nlp`` with parameters
+    ``p``; forces: handle → (world times s, forces N (n, 3)), contact forces from λ plus each
+    spring's force over its interval (external forces at their handle, for the audit)."""
+    sp = nlp.sp
+    P, W, F, E, _, FS = (np.asarray(v) for v in nlp.unpack(x, p))
+    F = F.ravel()
+    motion = Motion(np.asarray(P, float), np.asarray(W, float).ravel())
+    steps = list(sp.footsteps)
+    for j, si in enumerate(nlp.free_steps):
+        steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
+    mg = sp.character.total_mass * G
+    forces: dict = {}
+    for c, (h, k, sl) in enumerate(nlp.contact_index):
+        V = nlp.contact_basis[c] if nlp.contact_basis else friction_basis()
+        forces.setdefault(h, []).append((float(motion.time([nlp.s_points[k]])[0]), mg * V @ x[sl]))
+    contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
+    t_pts = motion.time(nlp.s_points)
+    for j, h in enumerate(nlp.spring_handles):
+        fj = FS[3 * j:3 * j + 3, :].T
+        on = (t_pts >= sp.springs[j].times[0] - 1e-9) & (t_pts <= sp.springs[j].times[-1] + 1e-9)
+        if h in contact:
+            t_old, f_old = contact[h]
+            t_all = np.unique(np.r_[t_old, t_pts[on]])
+            f_all = np.zeros((len(t_all), 3))
+            for tt, ff in zip(t_old, f_old):
+                f_all[np.argmin(np.abs(t_all - tt))] += ff
+            for tt, ff in zip(t_pts[on], fj[on]):
+                f_all[np.argmin(np.abs(t_all - tt))] += ff
+            contact[h] = (t_all, f_all)
+        elif on.any():
+            contact[h] = (t_pts[on], fj[on])
+    return motion, tuple(steps), float(np.ravel(E)[0]), contact

@@ -1,0 +1,125 @@
+"""What one spacetime subproblem (a Step's unit of work for one character) solves: plain data.
+
+Frozen dataclasses only, no CasADi: the character, style and motion to start from, the
+footsteps, which blocks are free under which window, and the soft or hard terms (handle
+targets, poses, avoid-spheres, springs).  Times are world times (s) of ``Subproblem.motion``;
+positions are world coordinates (m, z up); forces are in N.  The transcription
+(:mod:`.transcription`) turns a :class:`Subproblem` into an NLP.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..body import Character
+from ..footsteps import Footstep
+from ..ground import FLAT, Ground
+from ..motion import Motion
+from ..style import Style
+
+__all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Spring", "Avoid", "HESSIAN_MODES"]
+
+HESSIAN_MODES = ("gauss_newton", "exact", "gauss_newton_objective")
+
+
+@dataclass(frozen=True)
+class HandleTarget:
+    """Soft spring pulling ``handle`` toward ``point`` (world, m) at world time ``t``.
+
+    ``weight`` is in 1/m² of the normalised objective; ``hard`` makes it an equality.
+    """
+
+    handle: str
+    t: float
+    point: tuple[float, float, float]
+    weight: float = 10.0
+    hard: bool = False
+    name: str = "target"
+
+
+@dataclass(frozen=True)
+class PoseTarget:
+    """Soft spring toward a full pose ``q`` (35) at world time ``t`` (continuations, seams)."""
+
+    t: float
+    q: tuple[float, ...]
+    weight: float = 1.0
+    velocity: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class Spring:
+    """A physical spring on ``handle``: force stiffness · (anchor(t) − handle position) (N, world).
+
+    ``times`` (s, world, increasing) and ``points`` (n × 3, m) sample the anchor's path — a
+    partner's held handle in a rubber-band coupling (thesis §6.4.3); it is interpolated
+    linearly at the collocation times, and the force acts only within [times[0], times[-1]].
+    The force enters the equations of motion at the handle (one of FORCE_HANDLES).
+    """
+
+    handle: str
+    times: tuple[float, ...]
+    points: tuple[tuple[float, float, float], ...]
+    stiffness: float  # N/m
+    name: str = "spring"
+
+
+@dataclass(frozen=True)
+class Avoid:
+    """Keep ``handle`` outside a sphere (center world m, radius m) at world time ``t``."""
+
+    handle: str
+    t: float
+    center: tuple[float, float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
+class Subproblem:
+    """What one Step solves for one character.  Times are world times of ``motion``.
+
+    ``window`` (t0, t1): control points whose support lies inside are free; the others are
+    held, which gives the boundary conditions of a window.  ``free`` names the free blocks:
+    "q" (spline control points), "warp", "footprints" (positions of footsteps with
+    ``free=True``); λ is always free where a handle is planted.  ``dynamics`` is "full"
+    (energy with w_r) or "relaxed" (root residual weight divided by 100: timing steps).
+    ``cyclic`` makes the motion end in the state it began (velocities too), moved along
+    the ground (root x, y free).  "kinematic" drops the dynamics and stays near the initial motion (a kinematic
+    pre-solve that makes the initial guess satisfy the constraints).  ``style_end`` blends θ linearly over the window toward another style (transitions).
+    """
+
+    character: Character
+    style: Style
+    motion: Motion
+    footsteps: tuple[Footstep, ...] = ()
+    window: tuple[float, float] | None = None
+    free: frozenset = frozenset({"q", "warp"})
+    dynamics: str = "full"
+    targets: tuple[HandleTarget, ...] = ()
+    poses: tuple[PoseTarget, ...] = ()
+    avoid: tuple[Avoid, ...] = ()
+    springs: tuple[Spring, ...] = ()
+    style_end: Style | None = None
+    collocation_hz: float = 30.0  # dynamics (energy, contact forces)
+    constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
+    ground_hz: float = 0.0  # extra grid for non-penetration (0: the constraint grid; denser grids
+    # were measured to stall IPOPT: 300 iterations without convergence at 90 Hz)
+    soft_pin_hz: float = 0.0  # soft footprint springs between the hard points (0: off; see README)
+    soft_pin_weight: float = 1e5  # total weight, shared by the soft points
+    soft_ground_hz: float = 0.0  # one-sided ground penalty on a dense grid (0: off)
+    soft_ground_weight: float = 1e6  # total weight, shared by the dense points
+    fix_start_time: bool = True
+    fix_end_time: bool = True
+    cyclic: bool = False
+    contact_guess: dict | None = field(default=None, compare=False, hash=False)  # warm start for λ
+    min_foot_separation: float = 0.06
+    ground: Ground = FLAT  # terrain: footprint heights, non-penetration, friction pyramids (ground.py)
+    max_iter: int = 300
+    tol: float = 1e-4
+    label: str = "step"
+    ipopt_options: tuple = ()  # extra IPOPT options as (name, value) pairs (e.g. warm starts in NIO)
+    nlpsol_options: tuple = ()  # extra CasADi nlpsol options as (name, value) pairs (e.g. iteration_callback)
+    stall_iterations: int = 0  # > 0: stop as "Stalled" (a success) when the best feasible objective has
+    # improved by less than STALL_RATE per iterate over this many feasible iterates (see StallMonitor)
+    hessian: str = "gauss_newton"  # Hessian of the objective given to IPOPT (HESSIAN_MODES): "gauss_newton"
+    # (2 JᵀJ) or "exact" (adds 2 Σ r ∇²r: the compiled kernel Hessian chained through the splines; see
+    # transcription); "gauss_newton_objective" (an experiment: 2 JᵀJ without the constraints' curvature; README)
