@@ -15,7 +15,7 @@ import os
 from pathlib import Path
 
 from .errors import InputError, Location
-from .schema import is_style_path, suggest
+from .names import is_style_path, suggest
 
 __all__ = ["BUNDLED_DIR", "STYLES_DIR", "BUILTIN_STYLES", "bundled_scenarios", "bundled_styles",
            "find_scenario", "resolve_style", "style_problem", "allowed_roots", "describe_scenario"]

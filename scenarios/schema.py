@@ -21,12 +21,14 @@ offending field's line and column.  Checks that need to know where the scenario 
 """
 from __future__ import annotations
 
-import difflib
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import (BaseModel, ConfigDict, Field, PrivateAttr, Strict, StringConstraints, ValidationInfo,
                       field_validator, model_validator)
+
+from .bundled import resolve_style, style_problem
+from .names import is_style_path, suggest
 
 __all__ = [
     "Scenario", "CharacterSpec", "BodySpec", "ExtraMass", "LockedJoint", "RangeOfMotion", "StartSpec",
@@ -82,22 +84,6 @@ class FieldProblem(ValueError):
         self.message = message
         self.more = list(more or [])  # further problems (absolute paths) found by the same check
         super().__init__(message)
-
-
-def suggest(value: str, known: list[str] | tuple[str, ...], what: str, limit: int = 8) -> str:
-    """``unknown style 'rnu' (known: default, run, walk); did you mean 'run'?``"""
-    known = sorted(known)
-    shown = ", ".join(known[:limit]) + (", …" if len(known) > limit else "")
-    msg = f"unknown {what} {value!r} (known: {shown})"
-    close = difflib.get_close_matches(str(value), known, n=1, cutoff=0.5)
-    if close:
-        msg += f"; did you mean {close[0]!r}?"
-    return msg
-
-
-def is_style_path(ref: str) -> bool:
-    """A style reference is a file path if it has a folder part or a YAML suffix."""
-    return "/" in ref or "\\" in ref or ref.endswith((".yaml", ".yml"))
 
 
 Num = Annotated[float, Strict()]
@@ -535,7 +521,6 @@ class Scenario(_Model):
 
     def style_file(self, ref: str) -> Path | None:
         """The YAML file of a style reference; None for the built-in ``default`` style."""
-        from .bundled import resolve_style  # local: bundled imports this module
         return resolve_style(ref, self._base_dir)
 
     # -- cross-field checks ----------------------------------------------------------------
@@ -561,7 +546,6 @@ class Scenario(_Model):
 
     def problems(self, context: dict | None = None) -> list[tuple[tuple, str]]:
         """Every cross-field problem as (field path, message), in file order."""
-        from .bundled import style_problem  # local: bundled imports this module
         ctx = context or {}
         out: list[tuple[tuple, str]] = []
         T = self.duration
