@@ -37,10 +37,10 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from scenarios.errors import InputError, Location
 from scenarios.yamlio import load_model
 
-from .body import Character, make_character, PRESETS
+from .body import Character, default_character, make_character, PRESETS
 from .bvh import (BvhFile, END_SUFFIX, bvh_forward_kinematics, bvh_local_pose, read_bvh, resample_pose)
 from .retarget import PointSpec, Reconstruction, point_name as _point_name, point_positions, reconstruct, \
-    reconstruct_clip
+    reconstruct_clip, retarget
 
 __all__ = ["Rig", "RigVariant", "load_rig", "RIG_DIR", "ClipData", "MocapClip", "read_clip", "load_clip",
            "detect_tpose", "estimate_floor", "estimate_stature", "axes_matrix", "PointSpec",
@@ -174,13 +174,12 @@ class RigVariant:
 
 
 def _check_point(p: str) -> None:
-    from .body import _default  # the default character knows every handle and body name
-
+    ch = default_character()  # the default character knows every handle and body name
     if p.startswith("origin:"):
         body = p[len("origin:"):]
-        if body not in {b.name for b in _default.bodies}:
+        if body not in {b.name for b in ch.bodies}:
             raise ValueError(f"unknown body {body!r} in {p!r}")
-    elif p not in {h.name for h in _default.handles}:
+    elif p not in {h.name for h in ch.handles}:
         raise ValueError(f"unknown point {p!r}: not a handle of our character nor 'origin:BODY'")
 
 
@@ -431,12 +430,11 @@ def load_clip(path: str | os.PathLike, rig: str | os.PathLike | Rig | None = Non
     The character is ``make_character(preset, height, mass)`` with ``height`` defaulting to
     the clip's estimated stature and ``mass`` to the preset's body-mass index at that height.
     """
-    from .retarget import retarget
-
     data = read_clip(path, rig, fps, frames, skip_tpose, preset)
     H = data.performer_height if height is None else float(height)
     if mass is None:
         p = PRESETS[preset]
         mass = p.mass * (H / p.height) ** 2
     ch = make_character(preset, height=H, mass=mass)
-    return retarget(data, ch, smoothness=smoothness)
+    q, fit_error, info = retarget(data, ch, smoothness=smoothness)
+    return MocapClip(data, ch, q, fit_error, info)

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from scenarios.errors import ComposeError
 
-from .body import Character, N_DOF, N_ROOT, standing_pose
+from .body import Character, N_DOF, N_ROOT, default_character, standing_pose
 from .kinematics import frame_transforms
 
 __all__ = ["PointSpec", "point_name", "resolve_point", "point_expr", "points_fn", "point_positions", "retarget",
@@ -45,10 +45,9 @@ class PointSpec(BaseModel):
     @field_validator("body")
     @classmethod
     def _body_known(cls, v):
-        from .body import _default
-
-        if v not in {b.name for b in _default.bodies}:
-            raise ValueError(f"unknown body {v!r} (known: {', '.join(b.name for b in _default.bodies)})")
+        known = [b.name for b in default_character().bodies]
+        if v not in known:
+            raise ValueError(f"unknown body {v!r} (known: {', '.join(known)})")
         return v
 
     @field_validator("at")
@@ -225,9 +224,12 @@ def _build_solver(ch: Character, specs: tuple, T: int, smoothness: float, rw: tu
 def retarget(data, ch: Character, smoothness: float = 1e-3, rest_weight: float = 1e-5,
              rest_weights: dict[str, float] | None = None,
              max_iter: int = 500, q0: np.ndarray | None = None, verbose: bool = False):
-    """Fit ``ch`` to a :class:`~scenegraph.mocap.ClipData`; returns a MocapClip."""
-    from .mocap import MocapClip
+    """Fit ``ch`` to a :class:`~scenegraph.mocap.ClipData`; returns the fit ``(q, fit_error, info)``.
 
+    ``q`` (T, 35) is read-only, ``fit_error`` (T, K) the distance (m) of each fitted point to
+    its clip point, ``info`` the solver's status, iterations, seconds and objective.
+    :func:`scenegraph.mocap.load_clip` wraps them into a ``MocapClip``.
+    """
     t0 = time.perf_counter()
     names = tuple(data.target_names)
     specs = tuple(data.target_specs)
@@ -268,7 +270,7 @@ def retarget(data, ch: Character, smoothness: float = 1e-3, rest_weight: float =
     err.setflags(write=False)
     info = {"status": stats["return_status"], "iterations": int(stats["iter_count"]),
             "seconds": time.perf_counter() - t0, "objective": float(sol["f"])}
-    return MocapClip(data, ch, q, err, info)
+    return q, err, info
 
 
 # --- smooth reconstruction (NIO paper, Appendix A) --------------------------------------------
