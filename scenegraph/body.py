@@ -29,6 +29,7 @@ the segment's mass at a density of 1000 kg/m³.  Inertia is that of a uniform el
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -349,8 +350,23 @@ def standing_pose(ch: Character) -> np.ndarray:
     return q
 
 
-_default = make_character()
-DOF_NAMES: tuple[str, ...] = tuple(_default.dof_names)
+@functools.lru_cache(maxsize=None)
+def default_character() -> Character:
+    """The ``adult_male`` preset at its own height and mass, built once on first use.
+
+    It knows every DOF, body and handle name (validators check names against it); importing
+    this module builds nothing.
+    """
+    return make_character()
+
+
+# The DOF order make_character builds (root, trunk, left arm, left leg, right arm, right leg);
+# tests/test_body.py checks it against default_character().
+_SIDE_DOFS = ("shoulder_flex", "shoulder_twist", "shoulder_abd", "elbow_flex", "wrist_flex",
+              "hip_flex", "hip_abd", "hip_rot", "knee_flex", "ankle_flex", "ankle_inv", "toe_flex")
+DOF_NAMES: tuple[str, ...] = (("root_tx", "root_ty", "root_tz", "root_yaw", "root_pitch", "root_roll",
+                               "waist_flex", "waist_lat", "waist_twist", "chest_flex", "neck_flex")
+                              + tuple(f"{d}_{side}" for side in ("l", "r") for d in _SIDE_DOFS))
 JOINT_DOF_NAMES: tuple[str, ...] = DOF_NAMES[N_ROOT:]
-assert len(DOF_NAMES) == N_DOF and len(_default.bodies) == 18, (len(DOF_NAMES), len(_default.bodies))
-__all__.append("standing_pose")
+assert len(DOF_NAMES) == N_DOF, len(DOF_NAMES)
+__all__ += ["standing_pose", "default_character"]

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import character
 from scenarios.errors import ComposeError, InputError
-from scenegraph.body import DENSITY, DOF_NAMES, JOINT_DOF_NAMES, N_DOF, N_JOINT, PRESETS, make_character, standing_pose
+from scenegraph.body import DENSITY, DOF_NAMES, default_character, JOINT_DOF_NAMES, N_DOF, N_JOINT, PRESETS, make_character, standing_pose
 from scenegraph.kinematics import handle_positions_fn
 
 LIMBS = ("upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes")
@@ -19,6 +19,8 @@ def test_structure(adult):
     assert len(adult.bodies) == 18
     assert len(adult.dofs) == N_DOF == 35 and N_JOINT == 29
     assert len(DOF_NAMES) == len(set(DOF_NAMES)) == 35 and len(JOINT_DOF_NAMES) == 29
+    assert tuple(adult.dof_names) == DOF_NAMES  # the literal DOF order agrees with make_character
+    assert default_character() is default_character() and tuple(default_character().dof_names) == DOF_NAMES
     assert [d.kind for d in adult.dofs[:3]] == ["prismatic"] * 3
     assert all(d.kind == "revolute" for d in adult.dofs[3:])
     for i, d in enumerate(adult.dofs):
