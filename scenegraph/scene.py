@@ -28,6 +28,7 @@ import numpy as np
 from scenarios.errors import InputError
 from scenarios.schema import (AvoidGoal, Carry, FootprintsGoal, HandHold, ReachGoal, Scenario, StyleChangeGoal,
                               TackleGoal, WalkToGoal, joint_dofs)
+from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT  # re-exported: goal/start spring weights
 
 from .body import PRESETS, Character, make_character
 from .footsteps import RUN_BALL, WALK_BALL, WALK_HEEL, Footstep
@@ -46,7 +47,6 @@ __all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene",
 CADENCE = 1.85          # steps per second of generated walks
 STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
 FOOT_WIDTH = 0.18       # m, lateral distance between the feet of generated footsteps
-TARGET_WEIGHT = 300.0   # soft goal springs (1/m² of the normalised objective)
 TACKLE_CONTACT_TOL = 0.05  # m: the tackler's chest front within this of the target's torso surface
 TACKLE_SPEED_TOL = 0.10    # relative: closing speed within ±10 % of the goal speed
 TACKLE_SPEED_LEAD = 0.1    # s: the speed is asked for as a chest position this long before the impact
@@ -54,8 +54,6 @@ AVOID_MARGIN = 0.25        # m: the escape target lies this far outside the avoi
 #                            tackle_dodge's learned-style target 0.34-0.45 m from a `run` tackler)
 REACH_ACCEL = 1.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
 #                            time from the start of the optimised window to the goal (reaction time)
-START_WEIGHT = 100.0       # soft spring holding the pelvis at the character's start position (same units)
-AVOID_WEIGHT = 300.0       # soft escape springs (same units as TARGET_WEIGHT; 1000 made IPOPT oscillate)
 TORSO_BODIES = ("thorax", "abdomen")
 
 

@@ -45,8 +45,7 @@ import networkx as nx
 
 from scenarios.schema import (AvoidGoal, FootprintsGoal, ReachGoal, Scenario, ScheduleSpec,
                               StyleChangeGoal, TackleGoal, WalkToGoal)
-
-from scenegraph.scene import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
+from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 
 from .step import (COUPLED, DECREASING_HORIZON, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)

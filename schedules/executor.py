@@ -41,9 +41,10 @@ from pathlib import Path
 import numpy as np
 
 from scenarios.errors import ComposeError, InputError
+from scenarios.weights import START_WEIGHT
 from scenegraph.footsteps import Footstep
 from scenegraph.motion import Motion
-from scenegraph.scene import START_WEIGHT, Scene, coupling_springs, coupling_targets, goal_targets, handle_track
+from scenegraph.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.problem import HandleTarget, Subproblem, solve, window_mask
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics

@@ -12,7 +12,7 @@ from schedules import (COUPLED, DECREASING_HORIZON, JOINT, TIME_LAYERED, TIMEWAR
                        compile_schedule)
 from schedules.cli import main
 from schedules.compiler import layer_windows
-from scenegraph.scene import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
+from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 
 FULL = Path(__file__).resolve().parent / "scenarios" / "full.yaml"
 
