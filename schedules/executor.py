@@ -13,7 +13,11 @@ Semantics (kept identical for every ``--jobs``):
 * Constraint times live in canonical time: after a Step that moved the timewarp, footstep
   times are carried along (world time of the same canonical time under the new warp).
 * After every Step its result is written atomically to the run folder
-  (``steps/NNN.pkl``), so ``resume=True`` replays finished Steps and solves only the rest.
+  (``steps/NNN.npz`` + ``steps/NNN.json``, data only, their SHA-256 committed in
+  ``manifest.json``; see :mod:`schedules.checkpoints`), so ``resume=True`` replays finished
+  Steps and solves only the rest.  A committed checkpoint that is truncated, edited or from
+  another run is an error naming the file, never loaded.  The run folder is locked
+  (:class:`~schedules.checkpoints.RunLock`) while a run writes it.
 * A Step fails if IPOPT does not report success or a hard constraint group is violated by
   more than ``VIOLATION_TOL``; the run stops with :class:`StepFailed` (exit code 1), naming
   the step and the violated groups.  Two exceptions: a *full* step that hit its iteration
@@ -30,9 +34,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import pickle
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -40,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.errors import ComposeError, InputError
+from scenarios.errors import ComposeError, InputError, Location
 from scenarios.weights import START_WEIGHT
 from scenegraph.footsteps import Footstep
 from scenegraph.motion import Motion
@@ -49,6 +51,7 @@ from scenegraph.problem import HandleTarget, Subproblem, solve, window_mask
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
 
+from .checkpoints import Manifest, RunLock, atomic_write_text, checkpoint_names, read_checkpoint, write_checkpoint
 from .step import COUPLED, FULL, Schedule, Step
 
 __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
@@ -56,7 +59,7 @@ __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT",
 
 STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
-FORMAT = 1  # run-folder format
+FORMAT = 2  # run-folder format (1: pickled checkpoints, no longer read)
 STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
 SOFT_PIN_HZ = 120.0  # soft footprint springs of full steps: planted feet still between collocation points
 WARM_IPOPT = (("mu_strategy", "monotone"), ("mu_init", 1e-4))  # full steps warm-started from full steps
@@ -337,27 +340,7 @@ def _record(index: int, step: Step, data: dict) -> StepRecord:
                       {w: {k: c[k] for k in ("status", "iterations", "seconds", "energy")} for w, c in chars.items()})
 
 
-def _atomic_pickle(obj, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            pickle.dump(obj, fh, protocol=4)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _atomic_text(text: str, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
+_atomic_text = atomic_write_text  # the one atomic writer (fsync, umask mode, cleanup): checkpoints.py
 
 
 def _fmt_s(s: float) -> str:
@@ -367,24 +350,41 @@ def _fmt_s(s: float) -> str:
 
 # --- the run --------------------------------------------------------------------------------
 
-def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> None:
-    """Create or check the run folder.  Without resume, old checkpoints are removed."""
+def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> tuple[Manifest, dict | None]:
+    """Create or check the run folder; returns (manifest to commit new checkpoints to, the
+    manifest data read on resume or None).  Without resume, old checkpoints are removed."""
     man = run_dir / "manifest.json"
     if resume and man.exists():
-        try:
-            old = json.loads(man.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise InputError(f"--resume: cannot read {man}: {exc}") from None
+        old = Manifest.load(run_dir)
+        if old.get("format") != FORMAT:
+            raise InputError(f"--resume: the run folder {run_dir} has format {old.get('format')!r} "
+                             f"(this compose reads format {FORMAT}; format 1 held pickled checkpoints, which are "
+                             "never loaded); remove it or run without --resume", Location(str(man)))
         if old.get("fingerprint") != fingerprint:
             raise InputError(f"--resume: the run folder {run_dir} belongs to a different scenario or schedule "
                              f"(fingerprint {old.get('fingerprint')} != {fingerprint}); "
-                             "remove it or run without --resume")
-        return
+                             "remove it or run without --resume", Location(str(man)))
+        committed = {k: v for k, v in old.get("checkpoints", {}).items()}
+        return Manifest(run_dir, FORMAT, fingerprint, committed), old
     steps = run_dir / "steps"
     if steps.is_dir():
-        for p in steps.glob("*.pkl"):
-            p.unlink()
-    _atomic_text(json.dumps({"format": FORMAT, "fingerprint": fingerprint}, indent=1) + "\n", man)
+        for pattern in ("*.pkl", "*.npz", "*.json", ".*.tmp"):
+            for p in steps.glob(pattern):
+                p.unlink()
+    manifest = Manifest(run_dir, FORMAT, fingerprint)
+    manifest.save()
+    return manifest, None
+
+
+def _resumed(old: dict | None, run_dir: Path, name: str, log) -> dict | None:
+    """A verified checkpoint of a resumed run, or None (not resuming, or not committed)."""
+    if old is None:
+        return None
+    d = read_checkpoint(old, run_dir, name)
+    if d is None and name in checkpoint_names(run_dir):
+        print(f"    {run_dir / 'steps' / name}.json was not committed to the manifest (interrupted while "
+              "writing): solving its step again", file=log, flush=True)
+    return d
 
 
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
@@ -399,7 +399,13 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
     of decreasing-horizon and coupled schedules short on purpose (coupled full steps are
     capped at COUPLED_FULL_MAX_ITER)."""
     run_dir = Path(run_dir)
-    prepare_run_dir(run_dir, fingerprint, resume)
+    with RunLock(run_dir):
+        return _run_locked(scene, schedule, run_dir, fingerprint, jobs, resume, fail_capped, log)
+
+
+def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: str, jobs: int, resume: bool,
+                fail_capped: bool, log) -> RunResult:
+    manifest, old = prepare_run_dir(run_dir, fingerprint, resume)
     order = schedule.order()
     index = {s.id: i for i, s in enumerate(order)}
     first_of: dict[str, str] = {}
@@ -422,10 +428,9 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
         names = list(first_of)
         loaded, todo_pre = {}, []
         for who in names:
-            f = run_dir / "steps" / f"000_{who}.pkl"
-            if resume and f.exists():
-                with open(f, "rb") as fh:
-                    loaded[who] = pickle.load(fh)
+            d = _resumed(old, run_dir, f"000_{who}", log)
+            if d is not None:
+                loaded[who] = d
             else:
                 todo_pre.append(who)
         if pool is not None and len(todo_pre) > 1:
@@ -437,9 +442,10 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
             d = loaded.get(who) or fresh[who]
             if who in fresh:
                 d["fingerprint"] = fingerprint
-                _atomic_pickle(d, run_dir / "steps" / f"000_{who}.pkl")
-            elif d.get("fingerprint") != fingerprint:
-                raise InputError(f"--resume: checkpoint of the pre-solve of {who!r} does not belong to this run")
+                write_checkpoint(manifest, f"000_{who}", d)
+            elif d.get("fingerprint") != fingerprint or d.get("step") != f"presolve:{who}":
+                raise InputError(f"--resume: checkpoint of the pre-solve of {who!r} does not belong to this run",
+                                 Location(str(run_dir / "steps" / f"000_{who}.json")))
             print(f"[0/{n}] presolve {who}: {d['status']}, {d['iterations']} it, {d['seconds']:.1f} s"
                   + (" (resumed)" if who in loaded else ""), file=log, flush=True)
             presolved[who] = {k: d[k] for k in ("status", "success", "iterations", "seconds", "violations")}
@@ -451,12 +457,11 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
             results: dict[str, dict] = {}
             todo = []
             for s in gen:
-                f = run_dir / "steps" / f"{index[s.id] + 1:03d}.pkl"
-                if resume and f.exists():
-                    with open(f, "rb") as fh:
-                        d = pickle.load(fh)
+                f = run_dir / "steps" / f"{index[s.id] + 1:03d}.json"
+                d = _resumed(old, run_dir, f.stem, log)
+                if d is not None:
                     if d.get("step") != s.id or d.get("fingerprint") != fingerprint:
-                        raise InputError(f"--resume: checkpoint {f} does not belong to step {s.id!r}")
+                        raise InputError(f"--resume: checkpoint does not belong to step {s.id!r}", Location(str(f)))
                     results[s.id] = d
                     resumed += 1
                     done += 1
@@ -506,7 +511,7 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
                     raise StepFailed(f"step {s.id!r} failed: IPOPT status {rec.status} after {rec.iterations} "
                                      f"iterations; violated constraint groups: {groups} "
                                      f"(tolerance {VIOLATION_TOL:g}); finished steps are kept in {run_dir}")
-                _atomic_pickle(d, run_dir / "steps" / f"{index[s.id] + 1:03d}.pkl")
+                write_checkpoint(manifest, f"{index[s.id] + 1:03d}", d)
                 solved_now += 1
                 if stop_after and solved_now >= stop_after:
                     print(f"compose: COMPOSE_STOP_AFTER={stop_after}: stopping after step {s.id!r}", file=log,

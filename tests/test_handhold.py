@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -39,15 +38,14 @@ def palm_adaptation(name: str, run_dir: Path) -> dict[str, float]:
     from scenarios import load_scenario
     from scenegraph.motion import Motion
     from scenegraph.scene import build_scene, handle_track
+    from schedules.checkpoints import read_all
     from schedules.executor import _apply
 
     scene = build_scene(load_scenario(name))
     initial = {}
-    for f in sorted((run_dir / "steps").glob("*.pkl")):
-        with open(f, "rb") as fh:
-            d = pickle.load(fh)
-        if f.name.startswith("000_"):
-            who = f.name[4:-4]
+    for ck, d in read_all(run_dir).items():  # checkpoints in name order: pre-solves, then steps
+        if ck.startswith("000_"):
+            who = ck[4:]
             scene = scene.with_motion(who, Motion(d["ctrl"], d["warp"]))
             initial[who] = scene.character(who)
         elif not d.get("discarded"):

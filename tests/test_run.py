@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -30,10 +29,12 @@ def compose(*args, cwd, env=None, timeout=1500):
 
 def final_motions(run_dir: Path) -> dict:
     """{character: (ctrl, warp)} after the last checkpoint that touched each character."""
+    from schedules.checkpoints import read_all
+
     out = {}
-    for f in sorted((run_dir / "steps").glob("[0-9][0-9][0-9].pkl")):  # not the 000_<who> pre-solves
-        with open(f, "rb") as fh:
-            d = pickle.load(fh)
+    for name, d in read_all(run_dir).items():  # verified against the manifest's SHA-256
+        if name.startswith("000_"):  # not the 000_<who> pre-solves
+            continue
         for who, c in d["characters"].items():
             out[who] = (np.asarray(c["ctrl"]), np.asarray(c["warp"]))
     return out
@@ -134,8 +135,10 @@ def test_resume_after_kill_gives_the_same_result(walk_run, tmp_path):
     res = compose("walk", "-o", "w.usda", "--run-dir", "run", cwd=tmp_path, env={"COMPOSE_STOP_AFTER": "1"})
     assert res.returncode == 75, res.stderr[-3000:]
     assert not (tmp_path / "w.usda").exists()
-    assert len(list((tmp_path / "run" / "steps").glob("[0-9][0-9][0-9].pkl"))) == 1
-    assert (tmp_path / "run" / "steps" / "000_walker.pkl").exists()
+    assert len(list((tmp_path / "run" / "steps").glob("[0-9][0-9][0-9].npz"))) == 1
+    assert len(list((tmp_path / "run" / "steps").glob("[0-9][0-9][0-9].json"))) == 1
+    assert (tmp_path / "run" / "steps" / "000_walker.json").exists()
+    assert not list((tmp_path / "run").rglob("*.pkl"))
     res = compose("walk", "-o", "w.usda", "--run-dir", "run", "--resume", cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
     assert "resumed" in res.stderr
