@@ -346,6 +346,14 @@ def _pick_frames(scene: PreviewScene, n: int) -> list[int]:
     return sorted(set(int(round(x)) for x in np.linspace(0, T - 1, n)))
 
 
+def _new_file_mode() -> int:
+    """The mode a new file gets under the process umask (0644 under umask 022): the temporary
+    files of the atomic writes come from ``mkstemp``, which makes them 0600."""
+    old = os.umask(0o022)
+    os.umask(old)
+    return 0o666 & ~old
+
+
 def _atomic_save(fig, path: Path, **kw) -> Path:
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
@@ -355,6 +363,7 @@ def _atomic_save(fig, path: Path, **kw) -> Path:
     os.close(fd)
     try:
         fig.savefig(tmp, **kw)
+        os.chmod(tmp, _new_file_mode())
         os.replace(tmp, path)
     except OSError as exc:
         raise ComposeError(f"could not write {path}: {exc}") from exc
@@ -415,6 +424,7 @@ def render_movie(scene: PreviewScene, out, *, camera: ViewCamera | str | None = 
             for k in all_k:
                 _draw_frame(ax, scene, k, cam, all_k, limits)
                 writer.grab_frame()
+        os.chmod(tmp, _new_file_mode())
         os.replace(tmp, out)
     finally:
         if os.path.exists(tmp):
@@ -549,18 +559,21 @@ def plot_footprints(footprints, out, *, trajectories: Mapping[str, np.ndarray] |
 
 
 def write_report_plots(directory, *, energy=None, torques: Mapping[str, tuple] | None = None, footprints=None,
-                       trajectories: Mapping[str, np.ndarray] | None = None) -> dict[str, Path]:
+                       trajectories: Mapping[str, np.ndarray] | None = None, prefix: str = "") -> dict[str, Path]:
     """Write the report's plots into ``directory`` (next to the run report); returns
-    {plot name: path}.  ``torques`` = {character: (times, torques (T, n), names)}."""
+    {plot name: path}.  ``torques`` = {character: (times, torques (T, n), names)}.
+    ``prefix`` (the report file's stem, e.g. ``r`` for ``r.json``) names the files
+    ``<prefix>.energy_per_cycle.png`` …, so reports of two runs in one folder keep their own plots."""
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
+    pre = f"{prefix}." if prefix else ""
     out: dict[str, Path] = {}
     if energy is not None:
-        out["energy"] = plot_energy_per_cycle(energy, d / "energy_per_cycle.png")
+        out["energy"] = plot_energy_per_cycle(energy, d / f"{pre}energy_per_cycle.png")
     for who, (t, tau, names) in (torques or {}).items():
         from .usd_export import character_prim_name
-        out[f"torques:{who}"] = plot_joint_torques(t, tau, names, d / f"torques_{character_prim_name(who)}.png",
+        out[f"torques:{who}"] = plot_joint_torques(t, tau, names, d / f"{pre}torques_{character_prim_name(who)}.png",
                                                    title=f"Joint torques — {who}")
     if footprints is not None or trajectories:
-        out["footprints"] = plot_footprints(footprints or [], d / "footprints.png", trajectories=trajectories)
+        out["footprints"] = plot_footprints(footprints or [], d / f"{pre}footprints.png", trajectories=trajectories)
     return out

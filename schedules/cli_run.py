@@ -1,8 +1,12 @@
 """``compose run NAME|FILE``: scenario → schedule → solved Scene → USD stage + JSON report.
 
-Exit codes: 0 done; 2 bad input (scenario, arguments, a run folder that does not match on
-``--resume``); 1 a solve failed (the step and its violated constraint groups are named; the
-run folder keeps every finished step; no output stage is written).
+Exit codes: 0 done, every physics audit passes and every goal and coupling expected to hold
+holds; 1 a solve failed (the step and its violated constraint groups are named; the run
+folder keeps every finished step; no output stage is written), or the outputs were written
+but an audit fails or a goal/coupling expected to hold does not (an adversarial goal whose
+other side plans last is expected to fail and does not decide it); 2 bad input (scenario,
+arguments, a run folder that does not match on ``--resume``, a checkpoint that fails its
+SHA-256 check, a run folder locked by another ``compose run``).
 """
 from __future__ import annotations
 
@@ -187,7 +191,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
 
     from .cli_scenario import check_scenario
     from .compiler import compile_schedule
-    from .executor import _atomic_text, run_fingerprint, run_schedule
+    from .checkpoints import RunLock, atomic_write_text
+    from .executor import run_fingerprint, run_schedule
 
     t0 = time.perf_counter()
     if jobs < 1:
@@ -206,97 +211,111 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
         raise InputError(f"--report {report_path}: folder {report_path.parent} does not exist")
 
     schedule = compile_schedule(scn)
-    scene = build_scene(scn)
-    fp = run_fingerprint(source.read_text(encoding="utf-8"), schedule)
-    print(f"compose: running {scn.name!r}: {len(schedule)} steps, {len(schedule.generations())} generation(s), "
-          f"jobs {jobs}, run folder {rdir}", file=log, flush=True)
-    result = run_schedule(scene, schedule, run_dir=rdir, fingerprint=fp, jobs=jobs, resume=resume,
-                          fail_capped=fail_capped, log=log)
-    final = result.scene
+    with RunLock(rdir):  # one writer per run folder, held until the report is written
+        scene = build_scene(scn)
+        fp = run_fingerprint(source.read_text(encoding="utf-8"), schedule)
+        print(f"compose: running {scn.name!r}: {len(schedule)} steps, {len(schedule.generations())} generation(s), "
+              f"jobs {jobs}, run folder {rdir}", file=log, flush=True)
+        result = run_schedule(scene, schedule, run_dir=rdir, fingerprint=fp, jobs=jobs, resume=resume,
+                              fail_capped=fail_capped, log=log)
+        final = result.scene
 
-    audits = {}
-    for c in final.characters:
-        a = audit_motion(c.character, c.style, c.motion, c.footsteps, result.contact_forces.get(c.name),
-                         ground=final.ground)
-        audits[c.name] = a.to_dict()
-        audits[c.name]["tolerances"] = dict(AUDIT_TOLERANCES)
-        audits[c.name]["passes"] = a.passes(**AUDIT_TOLERANCES)
-    goals, couplings = goal_report(final, audits)
+        audits = {}
+        for c in final.characters:
+            a = audit_motion(c.character, c.style, c.motion, c.footsteps, result.contact_forces.get(c.name),
+                             ground=final.ground)
+            audits[c.name] = a.to_dict()
+            audits[c.name]["tolerances"] = dict(AUDIT_TOLERANCES)
+            audits[c.name]["passes"] = a.passes(**AUDIT_TOLERANCES)
+        goals, couplings = goal_report(final, audits)
 
-    # --- outputs: the stage, then the report (the stage is what a failure must not half-write)
-    tracks, markers = [], []
-    for c in final.characters:
-        times, q = c.motion.sample(fps)
-        tracks.append(CharacterTrack(c.name, c.character, np.asarray(q, float), float(times[0])))
-        for i, f in enumerate(c.footsteps):
-            markers.append(Marker(f"{c.name}_footprint_{i}", "footprint",
-                                  (f.position[0], f.position[1], final.ground.height(*f.position)),
-                                  (f.t0, f.t1), character=c.name))
-    for g in final.goals:
-        if g.type == "walk_to":
-            (x, y), _ = g.data
-            markers.append(Marker(f"goal_{g.name}", "goal", (x, y, 0.05), None, 0.08, g.character))
-        elif g.type == "reach":
-            markers.append(Marker(f"goal_{g.name}", "goal", tuple(g.data[1]), None, 0.04, g.character))
-    energies = {c.name: float(sum(r.per_character[c.name]["energy"] for r in result.records
-                                  if r.id == last)) for c in final.characters
-                for last in [next((r.id for r in reversed(result.records)
-                                   if c.name in r.per_character and r.kind == "full"), None)]}
-    metadata = {"scenario": scn.name, "scenario_file": str(source),
-                "styles": {ref: where for ref, where in final.style_refs},
-                "versions": _versions(), "energies": energies}
-    export_usd(out_path, tracks, fps, markers=markers, metadata=metadata, ground=final.ground)
+        # --- outputs: the stage, then the report (the stage is what a failure must not half-write)
+        tracks, markers = [], []
+        for c in final.characters:
+            times, q = c.motion.sample(fps)
+            tracks.append(CharacterTrack(c.name, c.character, np.asarray(q, float), float(times[0])))
+            for i, f in enumerate(c.footsteps):
+                markers.append(Marker(f"{c.name}_footprint_{i}", "footprint",
+                                      (f.position[0], f.position[1], final.ground.height(*f.position)),
+                                      (f.t0, f.t1), character=c.name))
+        for g in final.goals:
+            if g.type == "walk_to":
+                (x, y), _ = g.data
+                markers.append(Marker(f"goal_{g.name}", "goal", (x, y, 0.05), None, 0.08, g.character))
+            elif g.type == "reach":
+                markers.append(Marker(f"goal_{g.name}", "goal", tuple(g.data[1]), None, 0.04, g.character))
+        energies = {c.name: float(sum(r.per_character[c.name]["energy"] for r in result.records
+                                      if r.id == last)) for c in final.characters
+                    for last in [next((r.id for r in reversed(result.records)
+                                       if c.name in r.per_character and r.kind == "full"), None)]}
+        metadata = {"scenario": scn.name, "scenario_file": str(source),
+                    "styles": {ref: where for ref, where in final.style_refs},
+                    "versions": _versions(), "energies": energies}
+        export_usd(out_path, tracks, fps, markers=markers, metadata=metadata, ground=final.ground)
 
-    rep = {
-        "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),
-        "jobs": jobs, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
-        "steps": [r.to_dict() for r in result.records],
-        "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
-                                "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}
-                       for c in final.characters},
-        "goals": goals, "couplings": couplings,
-        **goal_verdict(goals, couplings),
-        "all_audits_pass": all(a["passes"] for a in audits.values()),
-        "total_seconds": round(time.perf_counter() - t0, 3), "solve_seconds": round(result.seconds, 3),
-        "versions": _versions(),
-    }
-    rep["passes"] = bool(rep["all_audits_pass"] and rep["winners_goals_hold"])
-    _atomic_text(json.dumps(rep, indent=1, default=_json_default) + "\n", report_path)
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        pass
-    else:
+        rep = {
+            "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),
+            "jobs": jobs, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
+            "steps": [r.to_dict() for r in result.records],
+            "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
+                                    "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}
+                           for c in final.characters},
+            "goals": goals, "couplings": couplings,
+            **goal_verdict(goals, couplings),
+            "all_audits_pass": all(a["passes"] for a in audits.values()),
+            "total_seconds": round(time.perf_counter() - t0, 3), "solve_seconds": round(result.seconds, 3),
+            "versions": _versions(),
+        }
+        # passes: every audit and every goal/coupling expected to hold (goals_as_expected implies
+        # winners_goals_hold; the losers' adversarial goals are expected to fail)
+        rep["passes"] = bool(rep["all_audits_pass"] and rep["goals_as_expected"])
+        atomic_write_text(json.dumps(rep, indent=1, default=_json_default) + "\n", report_path)
         try:
-            from scenegraph.preview import write_report_plots
-            per_cycle: dict = {}
-            for r in result.records:
-                if r.kind == "full":
-                    for who, pc in r.per_character.items():
-                        per_cycle.setdefault(who, {})[r.cycle] = per_cycle.get(who, {}).get(r.cycle, 0.0) + pc["energy"]
-            energy = {who: [v for _, v in sorted(d.items())] for who, d in per_cycle.items()}
-            fps_ = [{"position": m.position, "character": m.character, "interval": m.interval}
-                    for m in markers if m.kind == "footprint"]
-            traj = {tr.name: np.asarray(tr.q)[:, :2] for tr in tracks}
-            write_report_plots(report_path.parent, energy=energy, footprints=fps_, trajectories=traj)
-        except Exception as exc:  # plots are a convenience; never fail a finished run on them
-            print(f"compose: warning: report plots not written: {exc}", file=log)
-    print(f"compose: wrote {out_path} and {report_path} in {rep['total_seconds']:.1f} s"
-          + ("" if rep["all_goals_hold"] else "; some goals/couplings do not hold (see the report)"),
-          file=log, flush=True)
-    for n, e in goals.items():
-        if "expected_to_hold" in e:
-            print(f"compose: {e['type']} goal {n!r} ({e['plans_last']} plans last): "
-                  f"{'holds' if e['holds'] else 'does NOT hold'}"
-                  + (" (expected to hold)" if e["expected_to_hold"] else
-                     " (expected to fail by design: the other side plans last)"), file=log, flush=True)
-    for who, a in audits.items():
-        if not a["passes"]:
-            print(f"compose: physics audit FAILED for {who!r}: root residual {a['root_residual_rel']:.3g} body "
-                  f"weight, footstep error {a['footstep_error_max'] * 1000:.1f} mm, penetration "
-                  f"{a['penetration_max'] * 1000:.1f} mm, friction {a['friction_violation_max']:.3g} N "
-                  f"(tolerances {AUDIT_TOLERANCES}); outputs written for inspection", file=log, flush=True)
-    return rep
+            import matplotlib  # noqa: F401
+        except ImportError:
+            pass
+        else:
+            try:
+                from scenegraph.preview import write_report_plots
+                per_cycle: dict = {}
+                for r in result.records:
+                    if r.kind == "full":
+                        for who, pc in r.per_character.items():
+                            per_cycle.setdefault(who, {})[r.cycle] = per_cycle.get(who, {}).get(r.cycle, 0.0) + pc["energy"]
+                energy = {who: [v for _, v in sorted(d.items())] for who, d in per_cycle.items()}
+                fps_ = [{"position": m.position, "character": m.character, "interval": m.interval}
+                        for m in markers if m.kind == "footprint"]
+                traj = {tr.name: np.asarray(tr.q)[:, :2] for tr in tracks}
+                write_report_plots(report_path.parent, energy=energy, footprints=fps_, trajectories=traj,
+                                   prefix=report_path.stem)
+            except Exception as exc:  # plots are a convenience; never fail a finished run on them
+                print(f"compose: warning: report plots not written: {exc}", file=log)
+        print(f"compose: wrote {out_path} and {report_path} in {rep['total_seconds']:.1f} s"
+              + ("" if rep["all_goals_hold"] else "; some goals/couplings do not hold (see the report)"),
+              file=log, flush=True)
+        for n, e in goals.items():
+            if "expected_to_hold" in e:
+                print(f"compose: {e['type']} goal {n!r} ({e['plans_last']} plans last): "
+                      f"{'holds' if e['holds'] else 'does NOT hold'}"
+                      + (" (expected to hold)" if e["expected_to_hold"] else
+                         " (expected to fail by design: the other side plans last)"), file=log, flush=True)
+        failed = [(f"{e['type']} goal {n!r}", e) for n, e in goals.items()
+                  if not e["holds"] and e.get("expected_to_hold", True)]
+        failed += [(f"{c['type']} coupling {n!r}", c) for n, c in couplings.items() if not c["holds"]]
+        for what, e in failed:
+            print(f"compose: {what} does NOT hold: measured {_num(e.get('measured'))}, tolerance "
+                  f"{_num(e.get('tolerance'))} {e.get('unit') or ''}".rstrip(), file=log, flush=True)
+        for who, a in audits.items():
+            if not a["passes"]:
+                print(f"compose: physics audit FAILED for {who!r}: root residual {a['root_residual_rel']:.3g} body "
+                      f"weight, footstep error {a['footstep_error_max'] * 1000:.1f} mm, penetration "
+                      f"{a['penetration_max'] * 1000:.1f} mm, friction {a['friction_violation_max']:.3g} N "
+                      f"(tolerances {AUDIT_TOLERANCES}); outputs written for inspection", file=log, flush=True)
+        return rep
+
+
+def _num(v) -> str:
+    return f"{v:.4g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else str(v)
 
 
 def _json_default(o):
@@ -312,9 +331,10 @@ def _json_default(o):
 def _run(args) -> int:
     rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
                        run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped)
-    # exit 0: every physics audit passes and, in adversarial scenes, the goals of the side that
-    # plans last hold (the other side's goals are expected to fail and do not decide it)
-    return 0 if rep["all_audits_pass"] and rep["winners_goals_hold"] else 1
+    # exit 0: every physics audit passes and every goal and coupling expected to hold holds
+    # (walk_to, reach, footprints, couplings, the winners' tackle/avoid goals); in adversarial
+    # scenes the goals of the side that does not plan last are expected to fail and do not decide it
+    return 0 if rep["passes"] else 1
 
 
 def register(sub: argparse._SubParsersAction) -> None:

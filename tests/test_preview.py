@@ -147,6 +147,24 @@ def test_report_plots(tmp_path):
     preview.plot_energy_per_cycle([5.0, 4.0], tmp_path / "e.png")
 
 
+def test_report_plots_named_after_the_report_and_umask_mode(tmp_path):
+    """Two reports in one folder keep their own plots; files get the umask's mode (0644), not 0600."""
+    import stat
+    old = os.umask(0o022)
+    try:
+        a = preview.write_report_plots(tmp_path, energy=[3.0, 2.0], prefix="run_a")
+        b = preview.write_report_plots(tmp_path, energy=[5.0, 1.0],
+                                       footprints=[{"position": (0.0, 0.1), "character": "x"}], prefix="run_b")
+    finally:
+        os.umask(old)
+    assert a["energy"].name == "run_a.energy_per_cycle.png" and b["energy"].name == "run_b.energy_per_cycle.png"
+    assert b["footprints"].name == "run_b.footprints.png"
+    assert a["energy"].exists() and a["energy"].read_bytes() != b["energy"].read_bytes()
+    for p in (*a.values(), *b.values()):
+        assert stat.S_IMODE(p.stat().st_mode) == 0o644, p
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries left
+
+
 def test_cli_preview_and_run_directory(setup, tmp_path, capsys):
     d, tracks, markers, stage = setup
     out = tmp_path / "p.png"
