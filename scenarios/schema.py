@@ -24,8 +24,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import (BaseModel, ConfigDict, Field, PrivateAttr, Strict, StringConstraints, ValidationInfo,
-                      field_validator, model_validator)
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, Strict, StringConstraints,
+                      ValidationInfo, field_validator, model_validator)
 
 from .bundled import resolve_style, style_problem
 from .names import is_style_path, suggest
@@ -86,11 +86,25 @@ class FieldProblem(ValueError):
         super().__init__(message)
 
 
+# Plausibility limits (checked at validation, before anything is built or solved):
+MAX_COORD = 10_000.0  # m: every position lies within ±10 km of the origin (a scene, not a map)
+MAX_SPEED = 12.0  # m/s: a walk_to's average speed, start (or the previous walk_to) to target along
+# its waypoints; the fastest human sprinters peak at about 12.4 m/s (100 m world record pace)
+
+
+def _coord(v: float) -> float:
+    if abs(v) > MAX_COORD:
+        raise ValueError(f"{v:g} m is beyond the scene limit of ±{MAX_COORD:g} m from the origin "
+                         "(positions are metres in the scene)")
+    return v
+
+
 Num = Annotated[float, Strict()]
 Seconds = Annotated[float, Strict(), Field(ge=0.0, le=3600.0)]
 Degrees = Annotated[float, Strict()]
-Point2 = tuple[Num, Num]
-Point3 = tuple[Num, Num, Num]
+Coord = Annotated[float, Strict(), AfterValidator(_coord)]
+Point2 = tuple[Coord, Coord]
+Point3 = tuple[Coord, Coord, Coord]
 Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")]
 
 
@@ -544,6 +558,52 @@ class Scenario(_Model):
             self._source = str(ctx["file"])
         return self
 
+    def ground_height(self, x: float, y: float) -> float:
+        """Height (m) of the ground at (x, y): 0 on the flat ground, the last slope covering
+        the point otherwise (as scenegraph.ground builds it)."""
+        import math
+        z = 0.0
+        for sl in self.environment.slopes:
+            (x0, y0), (x1, y1) = sl.region.min, sl.region.max
+            if x0 <= x <= x1 and y0 <= y <= y1:
+                ox, oy = sl.origin if sl.origin is not None else ((x0 + x1) / 2, (y0 + y1) / 2)
+                h = math.radians(sl.heading)
+                z = math.tan(math.radians(sl.angle)) * ((x - ox) * math.cos(h) + (y - oy) * math.sin(h))
+        return z
+
+    def _plausibility(self, names: dict[str, int]) -> list[tuple[tuple, str]]:
+        """Goals a human body cannot meet: a walk_to faster than MAX_SPEED, a reach target under
+        the ground."""
+        import math
+        out: list[tuple[tuple, str]] = []
+        last: dict[str, tuple[float, tuple[float, float], str]] = {
+            c.name: (0.0, tuple(c.start.position), f"the start position of {c.name}") for c in self.characters}
+        walks = sorted((g.time, j, g) for j, g in enumerate(self.goals) if isinstance(g, WalkToGoal))
+        for t, j, g in walks:
+            if g.character not in last:
+                continue
+            t0, p0, where = last[g.character]
+            pts = [p0, *g.waypoints, g.target]
+            dist = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(pts, pts[1:]))
+            dist = max(0.0, dist - g.tolerance)
+            dt = t - t0
+            if dist > 0 and (dt <= 0 or dist / dt > MAX_SPEED):
+                need = f"{dist / dt:.3g} m/s" if dt > 0 else "an infinite speed"
+                out.append((("goals", j, "target"),
+                            f"walking {dist:.4g} m from {where} to {list(g.target)} in {max(dt, 0.0):g} s needs "
+                            f"{need}, above the limit of {MAX_SPEED:g} m/s (about the peak speed of the fastest "
+                            "human sprinters); move the target closer or the time later"))
+            last[g.character] = (t, tuple(g.target), f"goals[{j}]'s target")
+        for j, g in enumerate(self.goals):
+            if isinstance(g, ReachGoal) and g.character in names:
+                x, y, z = g.target
+                floor = self.ground_height(x, y)
+                if z < floor - 1e-9:
+                    out.append((("goals", j, "target"),
+                                f"target z = {z:g} m is {floor - z:.3g} m below the ground (z = {floor:.3g} m there): "
+                                f"the {g.handle} cannot go through the floor"))
+        return out
+
     def problems(self, context: dict | None = None) -> list[tuple[tuple, str]]:
         """Every cross-field problem as (field path, message), in file order."""
         ctx = context or {}
@@ -621,6 +681,8 @@ class Scenario(_Model):
                     changes.setdefault(k, j)
                     if g.time <= 0.0 or g.time >= T:
                         out.append((base + ("time",), f"a style change must lie strictly inside (0, {T}) s"))
+
+        out += self._plausibility(names)
 
         for j, c in enumerate(self.couplings):
             base = ("couplings", j)

@@ -1,7 +1,9 @@
 """Safe YAML loading that remembers where every value came from.
 
 ``load_yaml`` parses with PyYAML's safe composer, refuses tags, anchors and aliases (a
-scenario is plain data; aliases enable "billion laughs" expansion), and returns the plain
+scenario is plain data; aliases enable "billion laughs" expansion), reads numbers as a
+person writes them (YAML 1.2: ``1e6`` and ``1.0e300`` are numbers, where PyYAML's YAML 1.1
+resolver makes them strings; a quoted ``"1e6"`` stays a string), and returns the plain
 Python data together with a map from field path (a tuple of keys and indices) to the
 1-based (line, column) of the value.  ``validate`` runs a pydantic model over that data
 and turns the first validation error into an :class:`InputError` that names the file,
@@ -10,6 +12,7 @@ line, column and field path.
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -27,6 +30,9 @@ _PLAIN_TAGS = {
     "tag:yaml.org,2002:null",
 }
 Positions = dict[tuple, tuple[int, int]]
+# YAML 1.2 core schema floats that the YAML 1.1 resolver leaves as strings: an exponent
+# without a dot or without a sign ("1e6", "1.0e300", ".5e3")
+_FLOAT_12 = re.compile(r"[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)[eE][-+]?[0-9]+")
 M = TypeVar("M", bound=BaseModel)
 
 
@@ -65,6 +71,8 @@ def _construct(node, file, path, positions: Positions):
 
 
 def _scalar(node: yaml.ScalarNode):
+    if node.tag == "tag:yaml.org,2002:str" and node.style is None and _FLOAT_12.fullmatch(node.value):
+        return float(node.value)  # plain (unquoted) 1e6: a number, as YAML 1.2 reads it
     loader = yaml.SafeLoader("")
     return loader.construct_object(node, deep=True)
 

@@ -16,7 +16,8 @@ __all__ = ["register", "check_scenario"]
 
 
 def check_scenario(scn: Scenario) -> None:
-    """Checks beyond the schema that need the world model: referenced style files load."""
+    """Checks beyond the schema that need the world model: referenced style files load and the
+    schedule compiles (every Step's window at least ``compiler.MIN_WINDOW`` wide)."""
     from scenegraph.style import load_style  # schedules may import scenegraph
 
     refs = [(("characters", i, "style"), c.style) for i, c in enumerate(scn.characters)]
@@ -31,6 +32,10 @@ def check_scenario(scn: Scenario) -> None:
             load_style(f)
         except InputError as exc:
             raise InputError(f"style {ref!r} is invalid: {exc}", scn.location(path)) from None
+    # the schedule must be compilable: every window wide enough (a style change too close to the
+    # start or end of the scene leaves no room for its seam window), located at the cause
+    from .compiler import compile_schedule
+    compile_schedule(scn)
 
 
 def _validate(args) -> int:

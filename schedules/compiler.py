@@ -50,10 +50,16 @@ from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 from .step import (COUPLED, DECREASING_HORIZON, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)
 
-__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows"]
+__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows", "MIN_WINDOW"]
 
 DEFAULT_CYCLES = {TIME_LAYERED: 2, COUPLED: 4, DECREASING_HORIZON: 3}
 EPS = 1e-9
+# Narrowest window a Step may optimise (s).  A windowed Step frees only the control points whose
+# support lies inside its window (problem.window_mask); motions have 24 control points per
+# second (gait.initial_motion) and a cubic B-spline point spans 4 knot intervals (1/6 s), so
+# 0.2 s frees at least one point and holds 6 collocation points at 30 Hz.  A style change
+# 0.05 s after the start compiled a 0.05 s seam and died in CasADi ("Degenerate map operation").
+MIN_WINDOW = 0.2
 
 
 @dataclass
@@ -465,6 +471,42 @@ def _edges(blocks: list[_Block]) -> list[tuple[str, str]]:
     return edges
 
 
+def _check_windows(scn: Scenario, steps: list[Step]) -> None:
+    """Every Step's window spans at least MIN_WINDOW, else an InputError located at the field
+    that made it narrow: the nearest style change (its seam window is half the shorter
+    neighbouring window on each side), else ``schedule.seam`` / ``schedule.max_window``, else
+    the nearest goal time (decreasing-horizon windows end at the latest adversarial time)."""
+    from scenarios.errors import InputError
+
+    for s in steps:
+        w0, w1 = s.window
+        if w1 - w0 >= MIN_WINDOW - EPS:
+            continue
+        mid = 0.5 * (w0 + w1)
+        why = (f"step {s.id} would optimise the window [{w0:.4g}, {w1:.4g}] s, {w1 - w0:.3g} s wide; a window "
+               f"needs at least {MIN_WINDOW:g} s (24 spline control points per second, each spanning 1/6 s: "
+               "a narrower window frees no control point)")
+        changes = [(abs(g.time - mid), j, g) for j, g in enumerate(scn.goals)
+                   if isinstance(g, StyleChangeGoal) and g.character in s.characters]
+        spec = scn.schedule
+        if changes:
+            _, j, g = min(changes, key=lambda c: (c[0], c[1]))
+            room = min(g.time, scn.duration - g.time)
+            raise InputError(f"a style change at {g.time:g} s is too close to the "
+                             f"{'start' if g.time <= scn.duration - g.time else 'end'} of the scene "
+                             f"({room:.3g} s away) to fit its seam window: {why}; move it at least "
+                             f"{MIN_WINDOW:g} s inside (0, {scn.duration:g}) s",
+                             scn.location(("goals", j, "time")))
+        if spec is not None and spec.seam is not None and s.role == "seam":
+            raise InputError(f"schedule.seam {spec.seam:g} s is too narrow: {why}", scn.location(("schedule", "seam")))
+        if spec is not None and s.role == "window":
+            raise InputError(f"schedule.max_window {spec.max_window:g} s splits the scene too finely: {why}",
+                             scn.location(("schedule", "max_window")))
+        timed = [(abs(getattr(g, "time", 1e300) - w0), j) for j, g in enumerate(scn.goals) if hasattr(g, "time")]
+        path = ("goals", min(timed)[1], "time") if timed else ("duration",)
+        raise InputError(f"a goal time leaves too little time to optimise: {why}", scn.location(path))
+
+
 def compile_schedule(scn: Scenario) -> Schedule:
     """The Schedule of a scenario: independent branches of timewarp-scheduled subproblems."""
     st = _structure(scn)
@@ -512,6 +554,7 @@ def compile_schedule(scn: Scenario) -> Schedule:
     for s in all_steps:
         g.add_node(s.id)
     g.add_edges_from(all_edges)
+    _check_windows(scn, all_steps)
     reduced = nx.transitive_reduction(g)
     return Schedule.from_steps(all_steps, sorted(reduced.edges()), scenario=scn.name, groups=tuple(groups),
                                notes=tuple(notes))

@@ -73,6 +73,41 @@ def test_unknown_bundled_name_suggests():
 
 # --- minimal and full scenarios -----------------------------------------------------------------
 
+def test_numbers_read_as_a_person_writes_them():
+    """YAML 1.2 scalars: 1e0-style exponents are numbers (PyYAML's YAML 1.1 makes 1e6 and
+    1.0e300 strings); a quoted number stays a string and is refused as one."""
+    from scenarios.yamlio import parse_yaml
+    data, _ = parse_yaml("a: 1e6\nb: 1.0e300\nc: '1e6'\nd: -2.5E-3\ne: 1e\nf: 15e-1\n")
+    assert data == {"a": 1e6, "b": 1e300, "c": "1e6", "d": -2.5e-3, "e": "1e", "f": 1.5}
+    scn = parse_scenario("name: m\nduration: 12e-1\ncharacters:\n  - name: a\n", "m.yaml")
+    assert scn.duration == 1.2
+    with pytest.raises(InputError, match="m.yaml:2:11 duration"):
+        parse_scenario("name: m\nduration: '12e-1'\ncharacters:\n  - name: a\n", "m.yaml")
+
+
+def test_plausible_walk_to_and_reach_are_accepted():
+    """The plausibility limits leave room for real motions: 10 m in 1 s (a sprint), a palm
+    at floor height, a reach target on a slope above its plane."""
+    text = """name: ok
+duration: 2.0
+environment:
+  slopes:
+    - angle: 10
+      region: {min: [2.0, -1.0], max: [6.0, 1.0]}
+characters:
+  - name: a
+goals:
+  - {type: walk_to, character: a, target: [10.0, 0.0], time: 1.0}
+  - {type: walk_to, character: a, target: [10.0, 5.0], time: 2.0, waypoints: [[12.0, 2.0]]}
+  - {type: reach, character: a, handle: palm_r, target: [0.3, 0.0, 0.0], time: 0.5}
+  - {type: reach, character: a, handle: palm_l, target: [5.0, 0.0, 0.2], time: 0.6}
+"""
+    scn = parse_scenario(text, "ok.yaml")
+    assert scn.ground_height(5.0, 0.0) == pytest.approx(np.tan(np.radians(10)) * 1.0)
+    with pytest.raises(InputError, match=r"ok.yaml:\d+:\d+ goals\[3\].target: .*below the ground"):
+        parse_scenario(text.replace("[5.0, 0.0, 0.2]", "[5.0, 0.0, 0.1]"), "ok.yaml")
+
+
 def test_minimal_scenario_defaults():
     scn = parse_scenario("name: m\nduration: 1.0\ncharacters:\n  - name: a\n", "m.yaml")
     c = scn.characters[0]
