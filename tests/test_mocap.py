@@ -3,6 +3,7 @@ and a corpus of malformed files (tests/bad_bvh) that must fail with the right li
 from __future__ import annotations
 
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -313,10 +314,15 @@ def test_reconstruct_one_gait_cycle():
     assert np.sqrt(np.mean(qdd[:, 6:] ** 2)) < 20.0
 
 
-SHARED_TURN = Path("/work/shared/mocap/walk_turn_left_cmu_16_18.bvh")
+# the shared delivery folder sits next to the repository (<repo>/../shared/mocap), or where
+# COMPOSE_SHARED_MOCAP points
+SHARED_MOCAP = Path(os.environ.get("COMPOSE_SHARED_MOCAP") or Path(__file__).resolve().parents[2] / "shared" / "mocap")
+SHARED_TURN = SHARED_MOCAP / "walk_turn_left_cmu_16_18.bvh"
 
 
-@pytest.mark.skipif(not SHARED_TURN.exists(), reason="delivery folder with the 16_18 turn clip not present")
+@pytest.mark.skipif(not SHARED_TURN.exists(),
+                    reason=f"the CMU 16_18 turn clip is not in the shared mocap folder ({SHARED_TURN}); "
+                           "set COMPOSE_SHARED_MOCAP to the folder that holds walk_turn_left_cmu_16_18.bvh")
 def test_turn_clip_root_near_gimbal_lock():
     """16_18's root Euler angles swing wildly after the 90° left turn (near gimbal lock);
     slerp resampling must still give a smooth path that ends heading +Y (our left)."""

@@ -212,8 +212,15 @@ def test_local_counterexample_lowers_energy_within_C(local_nio):
 
 def test_seeded_counterexamples_enter_g(local_nio):
     """``run_bundle(seeds=…)``: a known motion within C below E(X_T) (here two Gauss–Newton steps
-    from X_T, lower than the one step local NIO takes) is a counterexample from the start: the
-    reported G(θ0) is at least E(X_T) − E(seed), and larger than without the seed."""
+    from X_T) is a counterexample from the start: the reported G(θ0) is at least
+    E(X_T) − E(seed), and at least G(θ0) without the seed.
+
+    What the mathematics guarantees: G(θ0) = E(X_T) − min E over the candidates (X_T, the
+    seeds, the local counterexample), and the seeded run's candidates are a superset of the
+    plain run's, so seeded ≥ plain.  Not that it is strictly larger: the second Gauss–Newton
+    step need not lower E below the first (on one machine both gave 539181.419653153), and
+    the two runs reach the same numbers by different code paths, so the comparisons allow
+    a rounding tolerance relative to E(X_T)."""
     m, nio, th = local_nio
     ET, _, _, lam = nio.measure(th, m)
     X1, _ = nio.local_counterexample(th, m, lam)
@@ -222,8 +229,10 @@ def test_seeded_counterexamples_enter_g(local_nio):
     E2 = nio.measure(th, X2)[0]
     plain = nio.run_bundle(th, max_iter=0)
     seeded = nio.run_bundle(th, max_iter=0, seeds=(X2,))
-    assert seeded.g_initial >= ET - E2 - 1e-9 * abs(ET)
-    assert seeded.g_initial > plain.g_initial
+    tol = 1e-9 * abs(ET)
+    assert seeded.g_initial >= ET - E2 - tol
+    assert seeded.g_initial >= plain.g_initial - tol
+    assert plain.g_initial >= -tol  # X_T itself is a candidate: G(θ0) ≥ 0
 
 
 def test_shipped_styles_have_provenance():
