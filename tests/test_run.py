@@ -89,6 +89,25 @@ def test_walk_end_to_end(walk_run):
     # the stage carries provenance
     text = stage.read_text()
     assert "walker" in text and "energies" in text
+    # report artefacts: named after the report (two reports in one folder keep their plots),
+    # written with the umask's mode (not mkstemp's 0600)
+    import stat
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE((d / "tmp" / "r.json").stat().st_mode) == 0o666 & ~umask
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        plot = d / "tmp" / "r.energy_per_cycle.png"
+        assert plot.is_file() and stat.S_IMODE(plot.stat().st_mode) == 0o666 & ~umask
+        assert not (d / "tmp" / "energy_per_cycle.png").exists()
+    # checkpoints: data only, each file's SHA-256 in the manifest
+    man = json.loads((d / "run" / "manifest.json").read_text())
+    assert man["format"] == 2 and set(man["checkpoints"]) == {
+        "000_walker.json", "000_walker.npz", "001.json", "001.npz", "002.json", "002.npz"}
+    assert not list((d / "run").rglob("*.pkl"))
 
 
 def _accepted(step: dict) -> bool:
@@ -206,3 +225,30 @@ def test_scene_units_and_edits():
     assert fs[0].t0 == 0.0 and fs[-1].t1 == pytest.approx(1.4)
     assert [f.foot for f in fs] == ["r", "l", "r", "l"][:len(fs)]
     assert all(f.free for f in fs)
+
+
+def test_exit_code_follows_every_goal_expected_to_hold(monkeypatch):
+    """Exit 1 when a non-adversarial goal (walk_to, reach) or a coupling does not hold; an
+    adversarial goal expected to fail by design (the other side plans last) does not decide it."""
+    import argparse
+
+    from schedules import cli_run
+
+    ok = {"holds": True}
+    walk_fail = {"type": "walk_to", "holds": False, "measured": 0.4, "tolerance": 0.05}
+    loser = {"type": "avoid", "holds": False, "expected_to_hold": False, "plans_last": "attacker"}
+    winner = {"type": "tackle", "holds": True, "expected_to_hold": True, "plans_last": "attacker"}
+    v = cli_run.goal_verdict({"w": walk_fail, "f": ok}, {})
+    assert not v["goals_as_expected"] and v["winners_goals_hold"]  # the old exit rule said 0 here
+    assert cli_run.goal_verdict({"t": winner, "a": loser}, {})["goals_as_expected"]
+    assert not cli_run.goal_verdict({"t": winner}, {"hold": {"type": "hand_hold", "holds": False}})["goals_as_expected"]
+
+    def fake(passes):
+        return lambda *a, **k: {"passes": passes}
+
+    args = argparse.Namespace(file="x", output=None, report=None, jobs=1, resume=False, run_dir=None, fps=30.0,
+                              fail_capped=False)
+    monkeypatch.setattr(cli_run, "run_scenario", fake(False))
+    assert cli_run._run(args) == 1
+    monkeypatch.setattr(cli_run, "run_scenario", fake(True))
+    assert cli_run._run(args) == 0
