@@ -244,10 +244,9 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
                 markers.append(Marker(f"goal_{g.name}", "goal", (x, y, 0.05), None, 0.08, g.character))
             elif g.type == "reach":
                 markers.append(Marker(f"goal_{g.name}", "goal", tuple(g.data[1]), None, 0.04, g.character))
-        energies = {c.name: float(sum(r.per_character[c.name]["energy"] for r in result.records
-                                      if r.id == last)) for c in final.characters
-                    for last in [next((r.id for r in reversed(result.records)
-                                       if c.name in r.per_character and r.kind == "full"), None)]}
+        # the energy of the final motion (the audit's Σ α Q_m² dt at the solver's contact-force
+        # times): a windowed step's own energy covers its window only
+        energies = {c.name: float(audits[c.name]["energy"]) for c in final.characters}
         metadata = {"scenario": scn.name, "scenario_file": str(source),
                     "styles": {ref: where for ref, where in final.style_refs},
                     "versions": _versions(), "energies": energies}

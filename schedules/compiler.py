@@ -398,6 +398,12 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
     sched = tuple(kinds)
     blocks: list[_Block] = []
     window_kinds = None
+    if len(windows) > 1:
+        # a window holds the timewarp (one spline over the whole scene, which its neighbours
+        # see), so a timing step there could only relax the dynamics: windows and seams are
+        # full steps, timed by the footstep plan (such timing steps reached their cap and
+        # were discarded in 3 of 6 windows of a 5 s walk, costing as much as the full steps)
+        window_kinds = (FULL,)
     if layered and len(windows) > 1 and T <= spec.max_window + EPS:
         # The whole branch fits one window (the layers come from a style change): solve it
         # whole first — timing (the timewarp is global: a windowed step holds the warp its

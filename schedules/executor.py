@@ -88,12 +88,14 @@ class StepRecord:
     violations: dict
     presolve: dict | None = None
     per_character: dict = field(default_factory=dict)
+    timing: dict = field(default_factory=dict)  # wall seconds by phase (problem.result.SolveTiming), summed
 
     def to_dict(self) -> dict:
         return {"index": self.index, "id": self.id, "kind": self.kind, "cycle": self.cycle,
                 "characters": list(self.characters), "status": self.status, "success": self.success,
                 "iterations": self.iterations, "seconds": round(self.seconds, 3), "energy": self.energy,
-                "violations": self.violations, "presolve": self.presolve, "per_character": self.per_character}
+                "violations": self.violations, "presolve": self.presolve, "per_character": self.per_character,
+                "timing": {k: round(v, 3) for k, v in self.timing.items()}}
 
 
 @dataclass
@@ -266,6 +268,7 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
             "seconds": res.seconds + (pre_info["seconds"] if pre_info else 0.0), "energy": res.energy,
             "violations": {k: float(v) for k, v in res.violations.items()}, "presolve": pre_info,
             "contact_forces": res.contact_forces, "window": sp.window,
+            "timing": res.timing.as_dict() if res.timing is not None else {},
         }
     return out
 
@@ -337,7 +340,17 @@ def _record(index: int, step: Step, data: dict) -> StepRecord:
                       all(c["success"] for c in chars.values()), sum(c["iterations"] for c in chars.values()),
                       sum(c["seconds"] for c in chars.values()), float(sum(c["energy"] for c in chars.values())),
                       viol, pre or None,
-                      {w: {k: c[k] for k in ("status", "iterations", "seconds", "energy")} for w, c in chars.items()})
+                      {w: {k: c.get(k) for k in ("status", "iterations", "seconds", "energy", "timing")}
+                       for w, c in chars.items()},
+                      _sum_timings([c.get("timing") or {} for c in chars.values()]))
+
+
+def _sum_timings(parts: list[dict]) -> dict:
+    out: dict = {}
+    for t in parts:
+        for k, v in t.items():
+            out[k] = out.get(k, 0.0) + float(v)
+    return out
 
 
 _atomic_text = atomic_write_text  # the one atomic writer (fsync, umask mode, cleanup): checkpoints.py

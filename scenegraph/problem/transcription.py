@@ -196,6 +196,17 @@ def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     return np.array(out)
 
 
+def _touches_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Which canonical times ``s`` have a position, velocity or acceleration that depends on a
+    free control point (``mask``) at all: the dynamics at the other times are constants."""
+    if not mask.any():
+        return np.zeros(len(s), bool)
+    dep = np.zeros(len(s), bool)
+    for d in (0, 1, 2):
+        dep |= np.any(np.abs(basis(n_ctrl, s, d)[:, mask]) > 0.0, axis=1)
+    return dep
+
+
 def _drop_cyclic_duplicates(pins: list) -> list:
     """Footstep pins of a cyclic motion without the ones the cycle already implies.
 
@@ -220,18 +231,25 @@ def transcribe(sp: Subproblem) -> NLP:
     ch, m = sp.character, sp.motion
     K, nW = m.n_ctrl, len(m.warp)
     mg = ch.total_mass * G
+    mask = window_mask(sp, K) if "q" in sp.free else np.zeros(K, bool)
+    warp_free = "warp" in sp.free
     s = _collocation_grid(sp, ch, sp.collocation_hz)
     s_con = _collocation_grid(sp, ch, sp.constraint_hz) if sp.constraint_hz > sp.collocation_hz else s
-    N = len(s)
-    wq = np.zeros(N)  # trapezoid weights in s
+    wq = np.zeros(len(s))  # trapezoid weights in s
     wq[1:] += np.diff(s) / 2
     wq[:-1] += np.diff(s) / 2
+    if not warp_free:
+        # a window: the dynamics only at the points its free control points reach (the others
+        # are constants), so a window's cost does not grow with the length of the scene
+        live = _touches_free(K, s, mask)
+        if live.any():
+            s, wq = s[live], wq[live]
+    N = len(s)
     B0, B1, B2 = (basis(K, s, d) for d in (0, 1, 2))
     W1, W2 = basis(nW, s, 1), basis(nW, s, 2)
     t_init = m.time(s)
 
     # free / fixed control points
-    mask = window_mask(sp, K) if "q" in sp.free else np.zeros(K, bool)
     free_idx = np.flatnonzero(np.repeat(mask[:, None], N_DOF, axis=1).ravel())
     xP = ca.MX.sym("P", len(free_idx))
     P_fixed = ca.MX.sym("P_fixed", K * N_DOF)  # parameter: current control points
@@ -242,7 +260,6 @@ def transcribe(sp: Subproblem) -> NLP:
     P_flat = ca.sparsify(ca.DM(keep)) * P_fixed + ca.mtimes(_sparse(sel), xP)
     P = ca.reshape(P_flat, N_DOF, K).T  # row-major flatten of (K, 35)
 
-    warp_free = "warp" in sp.free
     xW = ca.MX.sym("W", nW if warp_free else 0)
     W_fixed = ca.MX.sym("W_fixed", nW)
     warp = xW if warp_free else W_fixed
@@ -390,7 +407,8 @@ def transcribe(sp: Subproblem) -> NLP:
         for si, step in enumerate(sp.footsteps):
             for handle, (ta, tb), xy in planted_handles(si, step):
                 sa, sb = m.to_canonical([ta, tb])
-                for v in dense[(dense > sa) & (dense < sb)]:
+                inside = dense[(dense > sa) & (dense < sb)]
+                for v in inside[_touches_free(K, inside, mask) | warp_free]:
                     soft.append((handle, float(v), xy))
         if soft:
             HPs = hk.map(len(soft))(ca.mtimes(_sparse(basis(K, [v for _, v, _ in soft], 0)), P).T)
