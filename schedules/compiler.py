@@ -47,10 +47,10 @@ from scenarios.schema import (AvoidGoal, FootprintsGoal, ReachGoal, Scenario, Sc
                               StyleChangeGoal, TackleGoal, WalkToGoal)
 from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 
-from .step import (COUPLED, DECREASING_HORIZON, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
+from .step import (COUPLED, DECREASING_HORIZON, FREE, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)
 
-__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows", "MIN_WINDOW"]
+__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows", "receding_windows", "MIN_WINDOW"]
 
 DEFAULT_CYCLES = {TIME_LAYERED: 2, COUPLED: 4, DECREASING_HORIZON: 3}
 EPS = 1e-9
@@ -126,6 +126,19 @@ def layer_windows(T: float, boundaries: list[float], max_window: float,
             h = min(seam / 2.0, min(t - a, b - t))
         seams.append((t - h, t + h, t))
     return windows, seams
+
+
+def receding_windows(T: float, max_window: float) -> list[tuple[float, float]]:
+    """Windows of length ``max_window`` (s) over [0, T] that overlap by half, in time order.
+
+    Solved one after another, each starts from the solved motion before it and leaves its
+    end free, so every window costs the same and the whole scene costs n ≈ 2T/max_window
+    of them: linear in T."""
+    if T <= max_window + EPS:
+        return [(0.0, T)]
+    n = math.ceil((T - max_window) / (max_window / 2.0) - 1e-9) + 1
+    step = (T - max_window) / (n - 1)
+    return [(k * step, min(T, k * step + max_window)) for k in range(n)]
 
 
 # --- the scenario's structure ----------------------------------------------------------------
@@ -255,7 +268,7 @@ def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ..
     else:
         terms.append(("boundary:start", HARD))
     if w[1] < T - EPS:
-        terms.append(("boundary:end", HARD))
+        terms.append(("boundary:end", FREE if b.role == "receding" else HARD))
     goals: dict[str, object] = {}
     couplings: dict[str, object] = {}
     for ch in b.characters:
@@ -356,10 +369,19 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
             reasons.append(f"adversarial goal {gn!r} between {a} and {b}")
 
     layered = mode == "joint_layered" or (mode in ("single", "coupled") and (T > spec.max_window + EPS or changes))
+    # one character, long, one style: receding windows (each from the solved motion before
+    # it, end free).  Windows solved side by side from the kinematic initial motion held
+    # boundary states that no physical motion meets (a 4.8 s walk: window energy 1.6e4,
+    # stalled), and the seams and cycles that repair them multiply the cost.
+    receding = layered and mode == "single" and not changes and spec.seam is None
     if layered:
         if T > spec.max_window + EPS:
             reasons.append(f"duration {_fmt(T)} s exceeds max_window {_fmt(spec.max_window)} s")
-        windows, seams = layer_windows(T, changes, spec.max_window, spec.seam)
+        if receding:
+            windows, seams = receding_windows(T, spec.max_window), []
+            reasons.append("receding windows: each starts from the solved motion before it, its end free")
+        else:
+            windows, seams = layer_windows(T, changes, spec.max_window, spec.seam)
     else:
         windows, seams = [(0.0, T)], []
     if mode == "adversarial" and (changes or T > spec.max_window + EPS):
@@ -380,7 +402,7 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
     elif mode == "coupled":
         cycles = spec.cycles or DEFAULT_CYCLES[COUPLED]
     elif layered:
-        cycles = spec.cycles or DEFAULT_CYCLES[TIME_LAYERED]
+        cycles = spec.cycles or (1 if receding else DEFAULT_CYCLES[TIME_LAYERED])
     else:
         cycles = 1
     order = _solve_order(st, members, mode == "adversarial") if alternating else sorted(members)
@@ -441,7 +463,8 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
             t0 = t_event * (1.0 - 2.0 ** (1 - cycle))
             slots = [((t0, T), "horizon", "horizon", None)]
         else:
-            slots = [(w, "whole" if len(windows) == 1 else "window", "whole" if len(windows) == 1 else f"w{i}", None)
+            role = "receding" if receding else "window"
+            slots = [(w, "whole" if len(windows) == 1 else role, "whole" if len(windows) == 1 else f"w{i}", None)
                      for i, w in enumerate(windows)]
             slots += [((c0, c1), "seam", f"seam{i}", t) for i, (c0, c1, t) in enumerate(seams)]
         for window, role, label, seam_t in slots:

@@ -52,7 +52,7 @@ from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
 
 from .checkpoints import Manifest, RunLock, atomic_write_text, checkpoint_names, read_checkpoint, write_checkpoint
-from .step import COUPLED, FULL, Schedule, Step
+from .step import COUPLED, FREE, FULL, Schedule, Step
 
 __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
            "run_fingerprint"]
@@ -212,6 +212,7 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
     sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
                     dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid, springs=springs,
                     style_end=style_end, max_iter=_max_iter(_iteration_cap(step)),
+                    open_end=not whole and step.term("boundary:end") == FREE,
                     label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS,
                     soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on

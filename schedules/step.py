@@ -30,7 +30,7 @@ from scenarios.errors import ComposeError, InputError
 
 __all__ = ["Step", "StyleTimeline", "Group", "Schedule", "Weight",
            "TIMEWARP", "TIME_LAYERED", "COUPLED", "DECREASING_HORIZON", "JOINT", "KINDS",
-           "TIMING", "FULL", "HARD", "RELAXED"]
+           "TIMING", "FULL", "HARD", "RELAXED", "FREE"]
 
 # schedule kinds (thesis §6.4); JOINT: the characters of a group are solved together in one Step
 TIMEWARP = "timewarp"
@@ -46,8 +46,9 @@ FULL = "full"      # the full problem with hard dynamics
 
 HARD = "hard"
 RELAXED = "relaxed"
+FREE = "free"  # boundary:end of a receding window: the end state is free (the next window moves on from it)
 
-Weight = float | str  # a number (a penalty weight or a spring stiffness) or HARD / RELAXED
+Weight = float | str  # a number (a penalty weight or a spring stiffness) or HARD / RELAXED / FREE
 
 
 @dataclass(frozen=True)
@@ -98,13 +99,14 @@ class Step:
     terms       (name, weight) pairs; names: ``energy`` (weight), ``dynamics`` (hard|relaxed),
                 ``environment`` (ground, friction cone, no penetration, feet not crossing),
                 ``start`` (a soft spring of this weight holding the start position),
-                ``boundary:start`` / ``boundary:end`` (pose and velocity at the window's end
-                held at the current Scene), ``goal:<name>`` (``hard`` for footprints, else the
+                ``boundary:start`` / ``boundary:end`` (``hard``: pose and velocity at the window's
+                end held at the current Scene; ``boundary:end=free``: a receding window's end
+                state is free, its dynamics count up to the window's end), ``goal:<name>`` (``hard`` for footprints, else the
                 weight of its soft springs: walk_to, reach, tackle, avoid),
                 ``coupling:<name>`` (a stiffness in N/m = rubber-band continuation, or ``hard``)
     cycle       1-based schedule cycle
     schedules   the schedule kinds that produced it, outermost first, e.g. (coupled, timewarp)
-    role        ``whole`` | ``window`` | ``seam`` | ``horizon``
+    role        ``whole`` | ``window`` | ``seam`` | ``horizon`` | ``receding``
     group       the independent branch it belongs to (a connected component of characters)
     observes    other characters whose current motion enters (partners, opponents), read-only
     styles      full-scenario style timelines of the free characters

@@ -291,11 +291,26 @@ def test_long_duration_is_time_layered_within_max_window():
         .replace("time: 1.4", "time: 6.0")
     s = compile_schedule(parse_scenario(text, "t.yaml"))
     assert TIME_LAYERED in s.kinds
-    assert all(st.duration <= 2.5 + 1e-9 for st in s.order())
-    seams = [st for st in s.order() if st.role == "seam" and st.kind == "full" and st.cycle == 1]
-    assert len(seams) == 2
-    # seams of one cycle do not depend on each other
-    assert not s.has_path(seams[0].id, seams[1].id) and not s.has_path(seams[1].id, seams[0].id)
+    order = s.order()
+    assert all(st.duration <= 2.5 + 1e-9 for st in order)
+    # one character, one style: receding windows, each after the one before, overlapping by
+    # half, every one a full step; only the last one holds no free end
+    assert [st.role for st in order] == ["receding"] * len(order) and all(st.kind == "full" for st in order)
+    assert order[0].window[0] == 0.0 and order[-1].window[1] == 6.0
+    for a, b in zip(order, order[1:]):
+        assert s.has_path(a.id, b.id)
+        assert a.window[0] < b.window[0] < a.window[1]
+    assert [st.term("boundary:end") for st in order] == ["free"] * (len(order) - 1) + [None]
+    # cost linear in the duration: twice as long, about twice the windows
+    s2 = compile_schedule(parse_scenario(text.replace("6.0", "12.0"), "t.yaml"))
+    assert len(s2) <= 2 * len(s) + 1
+
+
+def test_long_duration_with_a_style_change_keeps_windows_and_seams():
+    text = bundled_scenarios()["walk_to_run"].read_text()
+    s = compile_schedule(parse_scenario(text, "t.yaml"))
+    roles = {st.role for st in s.order()}
+    assert "seam" in roles and "receding" not in roles
 
 
 def test_full_scenario_branches():

@@ -107,6 +107,8 @@ class Subproblem:
     soft_pin_weight: float = 1e5  # total weight, shared by the soft points
     soft_ground_hz: float = 0.0  # one-sided ground penalty on a dense grid (0: off)
     soft_ground_weight: float = 1e6  # total weight, shared by the dense points
+    open_end: bool = False  # a receding window: the control points whose support begins inside the
+    # window are free (the end state too), and the dynamics count only up to the window's end
     fix_start_time: bool = True
     fix_end_time: bool = True
     cyclic: bool = False

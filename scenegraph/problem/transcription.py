@@ -117,7 +117,9 @@ def _sparse(a: np.ndarray) -> ca.DM:
 def window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     """Control points free under the window: those whose support lies inside it, so a
     windowed solve never changes the motion (or invalidates contact forces) outside its
-    window; the points straddling two windows are freed by the seam window between them."""
+    window; the points straddling two windows are freed by the seam window between them.
+    With ``open_end`` the points straddling the window's end are free too (a receding window
+    leaves its end state to the next one)."""
     if sp.window is None:
         return np.ones(n_ctrl, bool)
     s0, s1 = sp.motion.to_canonical([sp.window[0], sp.window[1]])
@@ -126,7 +128,7 @@ def window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     for i in range(n_ctrl):
         lo = knots[max(0, i - 3)]
         hi = knots[min(len(knots) - 1, i + 1)] if i + 1 < len(knots) else 1.0
-        mask[i] = (lo >= s0 - 1e-9) and (hi <= s1 + 1e-9)
+        mask[i] = (lo >= s0 - 1e-9) and (hi <= s1 + 1e-9 or (sp.open_end and lo < s1 - 1e-9))
     return mask
 
 
@@ -242,6 +244,8 @@ def transcribe(sp: Subproblem) -> NLP:
         # a window: the dynamics only at the points its free control points reach (the others
         # are constants), so a window's cost does not grow with the length of the scene
         live = _touches_free(K, s, mask)
+        if sp.open_end and sp.window is not None:  # nothing past the window's end pulls on its end state
+            live &= s <= float(m.to_canonical([sp.window[1]])[0]) + 1e-9
         if live.any():
             s, wq = s[live], wq[live]
     N = len(s)
