@@ -132,14 +132,19 @@ def window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
     return mask
 
 
-def _depends_on_free(n_ctrl: int, s: float, mask: np.ndarray, other_free: bool) -> bool:
-    """Whether a kinematic constraint at canonical time s is a constraint of this step: the
-    free control points under s carry at least FREE_WEIGHT_MIN of its B-spline weight (or
-    another block it depends on is free).  Constraints on held values are constants; ones
-    at the very edge of a window, where a single free control point enters with a tiny
-    weight, are nearly so — several of them on one control point make the constraint
-    Jacobian nearly rank-deficient (IPOPT then stops with "Error in step computation")."""
-    return other_free or float(np.sum(basis(n_ctrl, [s])[0][mask])) >= FREE_WEIGHT_MIN
+def _depend_on_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray, other_free: bool) -> np.ndarray:
+    """Whether a kinematic constraint at each canonical time in ``s`` is a constraint of this
+    step: the free control points under it carry at least FREE_WEIGHT_MIN of its B-spline
+    weight (or another block it depends on is free).  Constraints on held values are
+    constants; ones at the very edge of a window, where a single free control point enters
+    with a tiny weight, are nearly so — several of them on one control point make the
+    constraint Jacobian nearly rank-deficient (IPOPT then stops with "Error in step
+    computation").  One basis evaluation for all times (one per time took 10 s of a 26 s
+    build for a window of a 9.6 s scene)."""
+    s = np.asarray(s, float)
+    if other_free or not len(s):
+        return np.full(len(s), bool(other_free))
+    return basis(n_ctrl, s)[:, mask].sum(axis=1) >= FREE_WEIGHT_MIN
 
 
 def _lambda_guess(sp: Subproblem, planted: list, s: np.ndarray, mg: float) -> np.ndarray:
@@ -257,11 +262,11 @@ def transcribe(sp: Subproblem) -> NLP:
     free_idx = np.flatnonzero(np.repeat(mask[:, None], N_DOF, axis=1).ravel())
     xP = ca.MX.sym("P", len(free_idx))
     P_fixed = ca.MX.sym("P_fixed", K * N_DOF)  # parameter: current control points
-    sel = np.zeros((K * N_DOF, len(free_idx)))
-    sel[free_idx, np.arange(len(free_idx))] = 1.0
+    sel = ca.DM.triplet(free_idx.tolist(), list(range(len(free_idx))), [1.0] * len(free_idx),
+                        K * N_DOF, len(free_idx))  # built sparse: dense it was 8155 × 2200 for a 9.6 s scene
     keep = np.ones(K * N_DOF)
     keep[free_idx] = 0.0
-    P_flat = ca.sparsify(ca.DM(keep)) * P_fixed + ca.mtimes(_sparse(sel), xP)
+    P_flat = ca.sparsify(ca.DM(keep)) * P_fixed + ca.mtimes(sel, xP)
     P = ca.reshape(P_flat, N_DOF, K).T  # row-major flatten of (K, 35)
 
     xW = ca.MX.sym("W", nW if warp_free else 0)
@@ -289,8 +294,9 @@ def transcribe(sp: Subproblem) -> NLP:
             ks = np.flatnonzero((s >= sa - 1e-9) & (s <= sb + 1e-9))
             for k in ks:
                 planted.append((handle, int(k), xy, si))
-            for v in s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]:
-                if _depends_on_free(K, v, mask, warp_free):
+            span = s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]
+            for v, dep in zip(span, _depend_on_free(K, span, mask, warp_free)):
+                if dep:
                     pins.append((handle, float(v), xy))
                 elif si in free_steps and si not in anchored:
                     pins.append((handle, float(v), xy))
@@ -423,7 +429,7 @@ def transcribe(sp: Subproblem) -> NLP:
     if sp.soft_ground_hz > 0:
         # below-ground depth of every foot handle between the hard points, least squares
         dense = np.linspace(0, 1, max(2, int(round(m.duration * sp.soft_ground_hz)) + 1))
-        dense = np.array([v for v in dense if _depends_on_free(K, v, mask, warp_free)])
+        dense = dense[_depend_on_free(K, dense, mask, warp_free)]
         if len(dense):
             HPg = hk.map(len(dense))(ca.mtimes(_sparse(basis(K, dense, 0)), P).T)
             depth = ca.vertcat(*[ca.fmin(HPg[3 * hk_names.index(h) + 2, :] - sp.ground.z(
@@ -432,8 +438,8 @@ def transcribe(sp: Subproblem) -> NLP:
     # ground non-penetration of every foot handle at every point
     s_gnd = s_con if sp.ground_hz <= 0 else \
         np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])
-    s_gnd = np.array([v for v in s_gnd if _depends_on_free(K, v, mask, warp_free)
-                      and not (sp.cyclic and v > 1.0 - 1e-9)])  # cyclic: the end repeats the start
+    s_gnd = s_gnd[_depend_on_free(K, s_gnd, mask, warp_free)
+                  & ~(sp.cyclic & (s_gnd > 1.0 - 1e-9))]  # cyclic: the end repeats the start
     HPc = hk.map(len(s_gnd))(ca.mtimes(_sparse(basis(K, s_gnd, 0)), P).T)
     ground = ca.vertcat(*[HPc[3 * hk_names.index(h) + 2, :] for h in CONTACT_HANDLES])
     if not sp.ground.flat:  # height above the terrain under each handle
@@ -450,8 +456,7 @@ def transcribe(sp: Subproblem) -> NLP:
     dl = HP[3 * hk_names.index("ankle_l"):3 * hk_names.index("ankle_l") + 2, :] - \
         HP[3 * hk_names.index("ankle_r"):3 * hk_names.index("ankle_r") + 2, :]
     lateral = -ca.sin(yaw) * dl[0, :] + ca.cos(yaw) * dl[1, :]
-    live = [k for k in range(N) if _depends_on_free(K, s[k], mask, warp_free)
-            and not (sp.cyclic and s[k] > 1.0 - 1e-9)]
+    live = np.flatnonzero(_depend_on_free(K, s, mask, warp_free) & ~(sp.cyclic & (s > 1.0 - 1e-9))).tolist()
     add("feet_crossing", lateral[live], sp.min_foot_separation, np.inf, "ineq")
     if sp.cyclic:  # thesis §2.2.2: the cycle ends where it began, moved along the ground
         qs, qe = ca.mtimes(_sparse(basis(K, [0.0], 0)), P).T, ca.mtimes(_sparse(basis(K, [1.0], 0)), P).T
