@@ -213,6 +213,7 @@ def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndar
                     dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid, springs=springs,
                     style_end=style_end, max_iter=_max_iter(_iteration_cap(step)),
                     open_end=not whole and step.term("boundary:end") == FREE,
+                    window_only=step.role == "receding",
                     label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS,
                     soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on

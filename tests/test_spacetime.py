@@ -205,7 +205,7 @@ def test_exact_hessian_solves_a_window():
     assert r.success, r.summary()
     window = (steps[1].t0 + 0.3, steps[1].t0 + 0.65)
     res = solve(Subproblem(CH, STYLE, r.motion, steps, window=window, free=frozenset({"q"}), hessian="exact",
-                           contact_guess=r.contact_forces, max_iter=100,
+                           contact_guess=r.contact_forces, max_iter=100, window_only=True,
                            ipopt_options=(("mu_strategy", "monotone"), ("mu_init", 1e-4))))
     assert res.success, res.summary()
     assert res.iterations <= 60, res.summary()

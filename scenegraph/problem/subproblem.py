@@ -107,6 +107,10 @@ class Subproblem:
     soft_pin_weight: float = 1e5  # total weight, shared by the soft points
     soft_ground_hz: float = 0.0  # one-sided ground penalty on a dense grid (0: off)
     soft_ground_weight: float = 1e6  # total weight, shared by the dense points
+    window_only: bool = False  # transcribe only the collocation points the window's free control
+    # points reach (a window's cost independent of the scene's length); receding windows use it —
+    # in walk_to_run's first window it ended "Error in step computation" where the whole-scene
+    # transcription stalls feasibly, so the other windows keep the whole scene for now
     open_end: bool = False  # a receding window: the control points whose support begins inside the
     # window are free (the end state too), and the dynamics count only up to the window's end
     fix_start_time: bool = True

@@ -245,7 +245,7 @@ def transcribe(sp: Subproblem) -> NLP:
     wq = np.zeros(len(s))  # trapezoid weights in s
     wq[1:] += np.diff(s) / 2
     wq[:-1] += np.diff(s) / 2
-    if not warp_free:
+    if sp.window_only and not warp_free:
         # a window: the dynamics only at the points its free control points reach (the others
         # are constants), so a window's cost does not grow with the length of the scene
         live = _touches_free(K, s, mask)
@@ -418,7 +418,7 @@ def transcribe(sp: Subproblem) -> NLP:
             for handle, (ta, tb), xy in planted_handles(si, step):
                 sa, sb = m.to_canonical([ta, tb])
                 inside = dense[(dense > sa) & (dense < sb)]
-                for v in inside[_touches_free(K, inside, mask) | warp_free]:
+                for v in (inside[_touches_free(K, inside, mask) | warp_free] if sp.window_only else inside):
                     soft.append((handle, float(v), xy))
         if soft:
             HPs = hk.map(len(soft))(ca.mtimes(_sparse(basis(K, [v for _, v, _ in soft], 0)), P).T)
