@@ -23,9 +23,14 @@ How the schedule is chosen (``schedule.kind: auto``, the default):
    straddling every boundary; θ is interpolated linearly across the seam (or across the
    style change's ``blend``).  When the duration fits one window (the layers come from a
    style change), the branch is first solved whole (timing and full), then its windows and
-   seams get full steps only, one cycle unless ``cycles`` says otherwise.
-3. Every subproblem uses the **timewarp** schedule: a ``timing`` Step (timewarp and free
-   placements, dynamics relaxed) then a ``full`` Step (dynamics hard).
+   seams get full steps only, one cycle unless ``cycles`` says otherwise.  One character
+   alone, longer than ``max_window``, with one style (and no ``seam`` given) gets
+   **receding windows** instead: windows of ``max_window`` overlapping by half, solved one
+   after another, each from the solved motion before it with its end free
+   (``boundary:end=free``); one cycle unless ``cycles`` says otherwise.  Windows and seams
+   are full steps (a window holds the global timewarp).
+3. Every subproblem over the whole scene uses the **timewarp** schedule: a ``timing`` Step
+   (timewarp and free placements, dynamics relaxed) then a ``full`` Step (dynamics hard).
 
 An explicit ``schedule.kind`` overrides step 2: ``timewarp`` solves each branch jointly in
 one subproblem (couplings hard), ``time_layered`` solves each branch jointly per window,

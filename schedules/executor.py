@@ -32,7 +32,6 @@ iterations of every subproblem.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import sys
 import time
@@ -51,7 +50,7 @@ from scenegraph.problem import HandleTarget, Subproblem, solve, window_mask
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
 
-from .checkpoints import Manifest, RunLock, atomic_write_text, checkpoint_names, read_checkpoint, write_checkpoint
+from .checkpoints import Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
 from .step import COUPLED, FREE, FULL, Schedule, Step
 
 __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
@@ -354,8 +353,6 @@ def _sum_timings(parts: list[dict]) -> dict:
             out[k] = out.get(k, 0.0) + float(v)
     return out
 
-
-_atomic_text = atomic_write_text  # the one atomic writer (fsync, umask mode, cleanup): checkpoints.py
 
 
 def _fmt_s(s: float) -> str:

@@ -212,6 +212,32 @@ def test_exact_hessian_solves_a_window():
     assert res.violations["footstep"] <= 1e-4 and res.violations["penetration"] <= 1e-4, res.summary()
 
 
+def test_window_only_and_open_end_transcription(small_window):
+    """A receding window's transcription: ``window_only`` keeps exactly the collocation points
+    whose q, q̇ or q̈ a free control point reaches (the dynamics elsewhere are constants);
+    ``open_end`` also frees the control points straddling the window's end and keeps no
+    point past it."""
+    from scenegraph.motion import basis
+    from scenegraph.problem import transcribe, window_mask
+
+    steps, m0, window = small_window
+    sp = Subproblem(CH, STYLE, m0, steps, window=window, free=frozenset({"q"}))
+    whole = transcribe(sp).s_points
+    local = transcribe(replace(sp, window_only=True)).s_points
+    mask = window_mask(sp, m0.n_ctrl)
+    reach = np.zeros(len(whole), bool)
+    for d in (0, 1, 2):
+        reach |= np.any(basis(m0.n_ctrl, whole, d)[:, mask] != 0.0, axis=1)
+    assert 0 < len(local) < len(whole)
+    np.testing.assert_array_equal(local, whole[reach])
+    sp_open = replace(sp, window_only=True, open_end=True)
+    open_mask = window_mask(sp_open, m0.n_ctrl)
+    assert mask.sum() < open_mask.sum() and np.all(open_mask[mask])  # a superset: the straddling points
+    s_end = float(m0.to_canonical([window[1]])[0])
+    pts = transcribe(sp_open).s_points
+    assert pts.max() <= s_end + 1e-9 and pts.min() < s_end
+
+
 def test_unknown_hessian_mode_is_rejected(small_window):
     from scenegraph.problem import transcribe
 
