@@ -28,9 +28,18 @@ from scenarios.yamlio import dump_yaml_atomic, load_model
 
 from .body import JOINT_DOF_NAMES, N_JOINT
 
-__all__ = ["Style", "ExamplePoses", "default_style", "load_style", "save_style", "PER_DOF_FIELDS"]
+__all__ = ["Style", "ExamplePoses", "default_style", "load_style", "save_style", "PER_DOF_FIELDS",
+           "THETA_LAYOUT", "N_THETA_FULL"]
 
 PER_DOF_FIELDS = ("alpha", "ks1", "ks2", "kd", "q_rest")
+N_THETA_FULL = len(PER_DOF_FIELDS) * N_JOINT + 2  # 147: the length of Style.vector()
+# θ = Style.vector() by name: each field's slice (k_shoe, h_rest: one number each); "springs"
+# is ks1, ks2, kd together and "kernel" everything after α (the residual kernel's θ, N_THETA).
+THETA_LAYOUT: dict[str, slice] = {
+    **{f: slice(i * N_JOINT, (i + 1) * N_JOINT) for i, f in enumerate(PER_DOF_FIELDS)},
+    "k_shoe": slice(N_THETA_FULL - 2, N_THETA_FULL - 1), "h_rest": slice(N_THETA_FULL - 1, N_THETA_FULL),
+    "springs": slice(N_JOINT, 4 * N_JOINT), "kernel": slice(N_JOINT, N_THETA_FULL),
+}
 ALPHA_SUM_TOL = 1e-3  # hand-written files round; files written by save_style sum to 1 within 1e-7
 
 
@@ -146,7 +155,7 @@ class Style(BaseModel):
     @classmethod
     def from_vector(cls, theta: np.ndarray, name: str = "learned", provenance: Provenance | None = None) -> "Style":
         t = np.asarray(theta, dtype=float)
-        parts = {f: t[i * N_JOINT:(i + 1) * N_JOINT] for i, f in enumerate(PER_DOF_FIELDS)}
+        parts = {f: t[THETA_LAYOUT[f]] for f in PER_DOF_FIELDS}
         return cls(name=name, **parts, k_shoe=float(t[-2]), h_rest=float(t[-1]), provenance=provenance)
 
     def with_(self, **changes) -> "Style":

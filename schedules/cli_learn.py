@@ -133,9 +133,7 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
         steps = tuple(replace(st, heel=None, ball=RUN_BALL) for st in steps)
     steps = _steps_on_motion(clip.character, motion, steps)
     if feasible:
-        from scenegraph.nio import feasible_target, resample
-
-        from scenegraph.nio import joint_rms_deg
+        from scenegraph.nio import feasible_target, joint_rms_deg, resample
 
         res = feasible_target(clip.character, resample(motion), steps)
         # a projection stopped early can be far from the clip (08_02 at 400 iterations: 15.7°

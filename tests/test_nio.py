@@ -77,24 +77,21 @@ def test_initial_theta_paper(small):
 
 
 def test_alpha_floor_bounds_the_model_step(small):
-    """NIO.alpha_floor is a lower bound of every α_j in the bundle's LP step (Σα = 1 kept);
-    without it the same cut drives α_0 to 0."""
-    from scenegraph.nio import _theta_scales
+    """``alpha_floor`` (NIO.alpha_floor, which run_bundle passes on) is a lower bound of every
+    α_j in the bundle's LP step (Σα = 1 kept); without it the same cut drives α_0 to 0."""
+    from scenegraph.nio.bundle import model_step
+    from scenegraph.nio.theta import theta_scales
     *_, nio = small
     th = default_style(nio.ch.total_mass).vector()
     g = np.zeros_like(th)
     g[0] = 10.0  # the model falls as α_0 falls
-    scales = _theta_scales(style_from_theta(th))
+    scales = theta_scales(style_from_theta(th))
     floor = 0.5 / N_JOINT
-    try:
-        for f, expect_below in ((0.0, True), (floor, False)):
-            nio.alpha_floor = f
-            new, _ = nio._model_step(th, [(1.0, g)], 4.0, scales)
-            assert abs(new[:N_JOINT].sum() - 1.0) < 1e-9
-            assert new[:N_JOINT].min() >= f - 1e-12
-            assert (new[0] < floor - 1e-6) == expect_below
-    finally:
-        nio.alpha_floor = 0.0
+    for f, expect_below in ((0.0, True), (floor, False)):
+        new, _ = model_step(th, [(1.0, g)], 4.0, scales, alpha_floor=f)
+        assert abs(new[:N_JOINT].sum() - 1.0) < 1e-9
+        assert new[:N_JOINT].min() >= f - 1e-12
+        assert (new[0] < floor - 1e-6) == expect_below
 
 
 def test_joint_rms_zero_for_same_motion(small):
