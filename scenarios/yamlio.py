@@ -19,6 +19,7 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from .atomic import atomic_write
 from .errors import InputError, Location
 
 __all__ = ["load_yaml", "parse_yaml", "read_text", "validate", "load_model", "format_path", "dump_yaml_atomic"]
@@ -154,9 +155,6 @@ def load_model(model: type[M], path: str | os.PathLike, context: dict | None = N
 
 
 def dump_yaml_atomic(data: Any, path: str | os.PathLike, header: str = "") -> None:
-    """Write plain data as YAML via a temporary file and a rename (no half-written file)."""
-    p = Path(path)
-    tmp = p.with_name(f".{p.name}.tmp{os.getpid()}")
+    """Write plain data as YAML (UTF-8) through the atomic writer (no half-written file)."""
     text = header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, p)
+    atomic_write(path, text)

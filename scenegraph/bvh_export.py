@@ -26,14 +26,13 @@ steep there.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from scenarios.errors import ComposeError, InputError
+from scenarios.atomic import atomic_write
+from scenarios.errors import InputError
 
 from .body import N_DOF, Character
 from .kinematics import numeric_fk
@@ -188,25 +187,6 @@ def resample_q(q: np.ndarray, source_fps: float, fps: float) -> np.ndarray:
     return np.stack([np.interp(ts, src, q[:, j]) for j in range(q.shape[1])], axis=1)
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same directory + rename."""
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"cannot write {path}: directory {parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
-    try:
-        with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise ComposeError(f"could not write {path}: {exc}") from exc
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
 def export_bvh(path, track, fps: float, *, source_fps: float | None = None, units: str = "cm") -> Path:
     """Write one :class:`~scenegraph.usd_export.CharacterTrack` as a BVH file at ``fps``.
 
@@ -227,7 +207,7 @@ def export_bvh(path, track, fps: float, *, source_fps: float | None = None, unit
     R, p = numeric_fk(ch, q)
     Rl, _ = _local_transforms(ch, order, R, p)
     text = bvh_text(skel, p[:, order[0]], Rl, fps, units)
-    atomic_write_text(path, text)
+    atomic_write(path, text, encoding="ascii")
     return path
 
 
@@ -243,8 +223,8 @@ def bvh_from_joint_transforms(path, names, parents, local: np.ndarray, fps: floa
     offsets[root[0]] = 0.0
     skel = BvhSkeleton(tuple(names), tuple(parents), offsets, dict(end_sites or {}))
     text = bvh_text(skel, local[:, root[0], :3, 3], local[:, :, :3, :3], fps, units)
-    atomic_write_text(Path(path), text)
+    atomic_write(Path(path), text, encoding="ascii")
     return Path(path)
 
 
-__all__ += ["resample_q", "atomic_write_text", "bvh_from_joint_transforms", "end_site_of"]
+__all__ += ["resample_q", "bvh_from_joint_transforms", "end_site_of"]

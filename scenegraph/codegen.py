@@ -32,6 +32,8 @@ from pathlib import Path
 
 import casadi as ca
 
+from scenarios.atomic import atomic_path
+
 __all__ = ["compiled", "cache_dir", "library_path", "id_function", "id_jacobian_function", "CodegenWarning", "STATS"]
 
 FLAGS = ("-O1", "-fPIC", "-shared")
@@ -125,18 +127,11 @@ def _build(f: ca.Function, cc: list[str], lib: Path, with_jacobian: bool = False
         if with_jacobian:
             gen.add(f.jacobian())
         gen.generate(tmp + os.sep)
-        fd, partial = tempfile.mkstemp(prefix=f".{lib.name}.", suffix=".tmp", dir=lib.parent)
-        os.close(fd)
-        try:
-            res = subprocess.run([*cc, *FLAGS, os.path.join(tmp, src), "-o", partial, "-lm"],
+        with atomic_path(lib, mode=0o755) as partial:
+            res = subprocess.run([*cc, *FLAGS, os.path.join(tmp, src), "-o", str(partial), "-lm"],
                                  capture_output=True, text=True)
             if res.returncode != 0:
                 raise subprocess.SubprocessError(f"{cc[0]} exited with {res.returncode}: {res.stderr.strip()}")
-            os.chmod(partial, 0o755)
-            os.replace(partial, lib)
-        finally:
-            if os.path.exists(partial):
-                os.unlink(partial)
     STATS["compiled"] += 1
     STATS["last_compile_s"] = time.perf_counter() - t0
 

@@ -17,15 +17,14 @@ camera sits at azimuth AZ from +X toward +Y and elevation EL above the ground).
 from __future__ import annotations
 
 import math
-import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from scenarios.atomic import atomic_path
 from scenarios.errors import ComposeError, InputError
 
 __all__ = [
@@ -346,30 +345,10 @@ def _pick_frames(scene: PreviewScene, n: int) -> list[int]:
     return sorted(set(int(round(x)) for x in np.linspace(0, T - 1, n)))
 
 
-def _new_file_mode() -> int:
-    """The mode a new file gets under the process umask (0644 under umask 022): the temporary
-    files of the atomic writes come from ``mkstemp``, which makes them 0600."""
-    old = os.umask(0o022)
-    os.umask(old)
-    return 0o666 & ~old
-
-
 def _atomic_save(fig, path: Path, **kw) -> Path:
-    path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"cannot write {path}: directory {parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=parent)
-    os.close(fd)
-    try:
+    """Save ``fig`` through the atomic writer (the format follows ``path``'s extension)."""
+    with atomic_path(path, suffix=path.suffix) as tmp:
         fig.savefig(tmp, **kw)
-        os.chmod(tmp, _new_file_mode())
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise ComposeError(f"could not write {path}: {exc}") from exc
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 
@@ -416,19 +395,11 @@ def render_movie(scene: PreviewScene, out, *, camera: ViewCamera | str | None = 
     h = inches * min(max(aspect, 0.3), 1.5)
     fig = Figure(figsize=(inches, round(h * dpi / 2) * 2 / dpi))  # even pixel sizes for yuv420p
     ax = fig.add_axes((0, 0, 1, 0.94))
-    parent = out.parent if str(out.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=ext, dir=parent)
-    os.close(fd)
-    try:
+    with atomic_path(out, suffix=ext) as tmp:
         with writer.saving(fig, tmp, dpi):
             for k in all_k:
                 _draw_frame(ax, scene, k, cam, all_k, limits)
                 writer.grab_frame()
-        os.chmod(tmp, _new_file_mode())
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return out
 
 

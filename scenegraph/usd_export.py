@@ -44,16 +44,16 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 import tempfile
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from scenarios.atomic import atomic_path
 from scenarios.errors import ComposeError, InputError
+from scenarios.versions import compose_version
 
 from .body import N_DOF, Character, standing_pose
 from .kinematics import numeric_fk
@@ -125,13 +125,6 @@ class ForceArrow:
 
 
 # --- helpers -----------------------------------------------------------------------------------
-
-def _compose_version() -> str:
-    try:
-        return version("compose-motion")
-    except PackageNotFoundError:
-        return "0.0.0+src"
-
 
 def _usd_version() -> str:
     from pxr import Usd
@@ -685,7 +678,7 @@ def build_stage(characters: Sequence[CharacterTrack], fps: float, *, markers: Se
     _write_camera(stage, np.concatenate(pts, axis=0))
 
     info = {
-        "composeVersion": _compose_version(),
+        "composeVersion": compose_version(),
         "usdVersion": _usd_version(),
         "fps": fps,
         "characters": [pp.track.name for pp in preps],
@@ -721,30 +714,18 @@ def export_usd(path, characters: Sequence[CharacterTrack], fps: float, *, marker
         raise InputError(f"cannot export USD to {path}: directory {parent} does not exist")
     stage = build_stage(characters, fps, markers=list(markers), metadata=metadata, debug_forces=list(debug_forces),
                         mesh_segments=mesh_segments, ground=ground)
-    tmpdir = tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
-    try:
-        stem = path.stem
+    with atomic_path(path, suffix=ext) as tmp:
         if ext == ".usdz":
-            inner = os.path.join(tmpdir, stem + ".usdc")
-            _export_layer(stage.GetRootLayer(), inner)
-            # The package records the file's mtime: pin it so the same input gives the same bytes.
-            stamp = int(os.environ.get("SOURCE_DATE_EPOCH", "946684800"))  # default 2000-01-01
-            os.utime(inner, (stamp, stamp))
-            tmp = os.path.join(tmpdir, path.name)
-            if not UsdUtils.CreateNewUsdzPackage(inner, tmp):
-                raise ComposeError(f"USD could not package {path}")
+            with tempfile.TemporaryDirectory(prefix="compose-usdz-") as tmpdir:
+                inner = os.path.join(tmpdir, path.stem + ".usdc")
+                _export_layer(stage.GetRootLayer(), inner)
+                # The package records the file's mtime: pin it so the same input gives the same bytes.
+                stamp = int(os.environ.get("SOURCE_DATE_EPOCH", "946684800"))  # default 2000-01-01
+                os.utime(inner, (stamp, stamp))
+                if not UsdUtils.CreateNewUsdzPackage(inner, str(tmp)):
+                    raise ComposeError(f"USD could not package {path}")
         else:
-            tmp = os.path.join(tmpdir, path.name)
-            _export_layer(stage.GetRootLayer(), tmp)
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except ComposeError:
-        raise
-    except OSError as exc:
-        raise ComposeError(f"could not write {path}: {exc}") from exc
-    finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
+            _export_layer(stage.GetRootLayer(), str(tmp))
     _reload_if_open(path)
     return path
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from importlib.metadata import PackageNotFoundError, version
 
 from scenarios.errors import ComposeError
+from scenarios.versions import compose_version
 
 __all__ = ["main", "build_parser"]
 
@@ -20,16 +20,9 @@ COMMAND_MODULES = (
 )
 
 
-def _version() -> str:
-    try:
-        return version("compose-motion")
-    except PackageNotFoundError:  # running from a source tree
-        return "0.0.0+src"
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="compose", description=__doc__)
-    parser.add_argument("--version", action="version", version=f"compose {_version()}")
+    parser.add_argument("--version", action="version", version=f"compose {compose_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         try:

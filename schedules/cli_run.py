@@ -26,14 +26,9 @@ __all__ = ["register", "run_scenario", "goal_report", "goal_verdict", "tackle_en
 
 
 def _versions() -> dict:
-    from importlib.metadata import PackageNotFoundError, version
-    out = {"python": platform.python_version()}
-    for pkg in ("compose-motion", "casadi", "numpy", "usd-core", "networkx", "pydantic"):
-        try:
-            out[pkg] = version(pkg)
-        except PackageNotFoundError:
-            out[pkg] = None
-    return out
+    from scenarios.versions import package_versions
+    return {"python": platform.python_version(),
+            **package_versions(("compose-motion", "casadi", "numpy", "usd-core", "networkx", "pydantic"))}
 
 
 def _check_output(value: str | None, default: Path) -> Path:

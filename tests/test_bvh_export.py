@@ -187,7 +187,7 @@ def test_bad_input_and_atomic_write(tmp_path, character, monkeypatch):
 
     def boom(a, b):
         raise OSError("no space left")
-    monkeypatch.setattr(bvh_export.os, "replace", boom)
+    monkeypatch.setattr(os, "replace", boom)
     with pytest.raises(ComposeError, match="no space"):
         export_bvh(target, tr, 30.0)
     assert target.read_text() == "OLD" and os.listdir(tmp_path) == ["keep.bvh"]
