@@ -28,7 +28,7 @@ from scenarios.errors import InputError, Location
 
 __all__ = [
     "BvhJoint", "BvhFile", "parse_bvh", "read_bvh", "END_SUFFIX",
-    "quat_mul", "quat_conj", "quat_rotate", "quat_from_axis_angle", "quat_to_matrix", "quat_from_matrix",
+    "quat_mul", "quat_conj", "quat_rotate", "quat_from_axis_angle", "quat_to_matrix",
     "quat_slerp", "euler_channels_to_quat", "bvh_local_pose", "bvh_forward_kinematics", "resample_pose",
 ]
 
@@ -375,32 +375,6 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
         np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
         np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
     ], -2)
-
-
-def quat_from_matrix(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w ≥ 0) from rotation matrices (..., 3, 3) (Shepperd's method)."""
-    R = np.asarray(R, dtype=float)
-    shp = R.shape[:-2]
-    M = R.reshape(-1, 3, 3)
-    out = np.empty((M.shape[0], 4))
-    tr = np.trace(M, axis1=1, axis2=2)
-    for i in range(M.shape[0]):
-        m = M[i]
-        if tr[i] > 0:
-            s = math.sqrt(tr[i] + 1.0) * 2
-            out[i] = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-        elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-            s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
-            out[i] = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-        elif m[1, 1] > m[2, 2]:
-            s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
-            out[i] = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-        else:
-            s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
-            out[i] = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    out *= np.where(out[:, :1] < 0, -1.0, 1.0)
-    out /= np.linalg.norm(out, axis=1, keepdims=True)
-    return out.reshape(shp + (4,))
 
 
 def quat_slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -57,6 +57,7 @@ from scenarios.versions import compose_version
 
 from .body import N_DOF, Character, standing_pose
 from .kinematics import numeric_fk
+from .rotations import quat_from_matrix
 
 __all__ = [
     "CharacterTrack", "Marker", "ForceArrow", "export_usd", "joint_paths", "validate_stage",
@@ -166,33 +167,6 @@ def joint_paths(ch: Character) -> tuple[list[int], list[str]]:
         b = ch.bodies[i]
         paths[b.name] = b.name if b.parent is None else f"{paths[by_name[b.parent].name]}/{b.name}"
     return order, [paths[ch.bodies[i].name] for i in order]
-
-
-def _mat_to_quat(R: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) → unit quaternions (..., 4) as (w, x, y, z)."""
-    R = np.asarray(R, dtype=float)
-    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
-    tr = m00 + m11 + m22
-    cand = np.stack([tr, m00, m11, m22], axis=-1)
-    k = np.argmax(cand, axis=-1)
-    q = np.empty(R.shape[:-2] + (4,))
-    # k == 0: w largest
-    s = np.sqrt(np.maximum(1.0 + cand[..., 0], 1e-300)) * 2.0
-    q0 = np.stack([0.25 * s, (R[..., 2, 1] - R[..., 1, 2]) / s, (R[..., 0, 2] - R[..., 2, 0]) / s,
-                   (R[..., 1, 0] - R[..., 0, 1]) / s], -1)
-    s = np.sqrt(np.maximum(1.0 + m00 - m11 - m22, 1e-300)) * 2.0
-    q1 = np.stack([(R[..., 2, 1] - R[..., 1, 2]) / s, 0.25 * s, (R[..., 0, 1] + R[..., 1, 0]) / s,
-                   (R[..., 0, 2] + R[..., 2, 0]) / s], -1)
-    s = np.sqrt(np.maximum(1.0 - m00 + m11 - m22, 1e-300)) * 2.0
-    q2 = np.stack([(R[..., 0, 2] - R[..., 2, 0]) / s, (R[..., 0, 1] + R[..., 1, 0]) / s, 0.25 * s,
-                   (R[..., 1, 2] + R[..., 2, 1]) / s], -1)
-    s = np.sqrt(np.maximum(1.0 - m00 - m11 + m22, 1e-300)) * 2.0
-    q3 = np.stack([(R[..., 1, 0] - R[..., 0, 1]) / s, (R[..., 0, 2] + R[..., 2, 0]) / s,
-                   (R[..., 1, 2] + R[..., 2, 1]) / s, 0.25 * s], -1)
-    for j, qj in enumerate((q0, q1, q2, q3)):
-        q[k == j] = qj[k == j]
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    return q
 
 
 def _continuous_quats(q: np.ndarray) -> np.ndarray:
@@ -411,7 +385,7 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
     # Animation: one sample per frame for translations, rotations and scales.
     anim.CreateJointsAttr(joint_tokens)
     Rl, tl = _local_transforms(ch, order, prep.R, prep.p)
-    quat = _continuous_quats(_mat_to_quat(Rl))  # (T, J, 4) w, x, y, z
+    quat = _continuous_quats(quat_from_matrix(Rl))  # (T, J, 4) w, x, y, z
     xyzw = np.ascontiguousarray(np.concatenate([quat[..., 1:], quat[..., :1]], axis=-1).astype(np.float32))
     trans = np.ascontiguousarray(tl.astype(np.float32))
     ones = Vt.Vec3hArray.FromNumpy(np.ones((J, 3), dtype=np.float16))

@@ -12,9 +12,10 @@ import pytest
 
 from scenarios.errors import InputError
 from scenegraph.body import N_DOF
-from scenegraph.bvh import (END_SUFFIX, euler_channels_to_quat, quat_from_matrix, quat_slerp, quat_to_matrix,
+from scenegraph.bvh import (END_SUFFIX, euler_channels_to_quat, quat_slerp, quat_to_matrix,
                             read_bvh, parse_bvh)
 from scenegraph.contacts import detect_footsteps
+from scenegraph.rotations import quat_from_matrix
 from scenegraph.mocap import load_clip, load_rig, read_clip
 
 ROOT = Path(__file__).resolve().parent.parent

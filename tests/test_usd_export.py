@@ -23,6 +23,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
 from scenarios.errors import ComposeError, InputError  # noqa: E402
 from scenegraph.body import make_character, standing_pose  # noqa: E402
 from scenegraph.kinematics import numeric_fk  # noqa: E402
+from scenegraph.rotations import quat_from_matrix  # noqa: E402
 from scenegraph import usd_export  # noqa: E402
 from scenegraph.usd_export import (CharacterTrack, ForceArrow, Marker, export_usd, joint_paths,  # noqa: E402
                                    validate_stage)
@@ -376,7 +377,8 @@ def test_quaternion_conversion_all_branches():
         Q *= np.sign(np.linalg.det(Q))
         mats.append(Q)
     mats += [np.diag([1.0, -1, -1]), np.diag([-1.0, 1, -1]), np.diag([-1.0, -1, 1]), np.eye(3)]
-    q = usd_export._mat_to_quat(np.array(mats))
+    q = quat_from_matrix(np.array(mats))
+    assert np.all(q[:, 0] >= 0)
     for M, (w, x, y, z) in zip(mats, q):
         back = np.array(Gf.Matrix3d(Gf.Rotation(Gf.Quatd(w, x, y, z)))).T  # row-vector -> column
         assert np.allclose(back, M, atol=1e-12)
