@@ -354,6 +354,11 @@ def read_clip(path: str | os.PathLike, rig: str | os.PathLike | Rig | None = Non
 
 # --- fitted clip ---------------------------------------------------------------------------
 
+def _from_data(name: str) -> property:
+    """A read-only attribute of a :class:`MocapClip` that is its ``data``'s attribute ``name``."""
+    return property(lambda self: getattr(self.data, name), doc=f"``data.{name}``")
+
+
 @dataclass(frozen=True)
 class MocapClip:
     """A mocap clip with our character fitted to it.
@@ -369,42 +374,18 @@ class MocapClip:
     fit_error: np.ndarray
     solver: dict = field(default_factory=dict)
 
-    # conveniences mirroring the brief's field list
-    @property
-    def fps(self) -> float:
-        return self.data.fps
-
-    @property
-    def times(self) -> np.ndarray:
-        return self.data.times
-
-    @property
-    def file(self) -> str:
-        return self.data.file
-
-    @property
-    def floor_height(self) -> float:
-        return self.data.floor_height
-
-    @property
-    def performer_height(self) -> float:
-        return self.data.performer_height
-
-    @property
-    def frame_range(self) -> tuple[int, int]:
-        return self.data.frame_range
-
-    @property
-    def joints(self) -> np.ndarray:
-        return self.data.joints
-
-    @property
-    def n_frames(self) -> int:
-        return self.data.n_frames
-
-    @property
-    def duration(self) -> float:
-        return self.data.duration
+    # conveniences mirroring the brief's field list, read from ``data``: fps (Hz), times (s,
+    # (T,)), file, floor_height (m), performer_height (m), frame_range (first, last source
+    # frame), joints (T, J, 3) m, n_frames, duration (s)
+    fps = _from_data("fps")
+    times = _from_data("times")
+    file = _from_data("file")
+    floor_height = _from_data("floor_height")
+    performer_height = _from_data("performer_height")
+    frame_range = _from_data("frame_range")
+    joints = _from_data("joints")
+    n_frames = _from_data("n_frames")
+    duration = _from_data("duration")
 
     def mean_fit_error(self, weighted: bool = False) -> float:
         if weighted:

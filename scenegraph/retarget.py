@@ -488,23 +488,45 @@ class _Cache:
         return self.r, self.J
 
 
-class _FCallback(ca.Callback):
-    def __init__(self, cache, n):
+class _LsqCallback(ca.Callback):
+    """A CasADi callback over the cached residual r(x) and Jacobian J of a least-squares
+    problem; the subclass declares its inputs and outputs as (name, sparsity) pairs (name
+    None: CasADi's default ``i<k>``/``o<k>``) and computes them in ``eval``."""
+
+    def __init__(self, name: str, cache, n: int, ins, outs, opts: dict | None = None):
         ca.Callback.__init__(self)
         self.cache, self.n = cache, n
-        self.construct("recon_f", {"enable_fd": False})
+        self._ins, self._outs = ins, outs
+        self.construct(name, opts or {})
 
     def get_n_in(self):
-        return 1
+        return len(self._ins)
 
     def get_n_out(self):
-        return 1
+        return len(self._outs)
+
+    def get_name_in(self, i):
+        return self._ins[i][0] or f"i{i}"
+
+    def get_name_out(self, i):
+        return self._outs[i][0] or f"o{i}"
 
     def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, 1)
+        return self._ins[i][1]
 
     def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, 1)
+        return self._outs[i][1]
+
+
+def _dense(rows: int, cols: int = 1) -> ca.Sparsity:
+    return ca.Sparsity.dense(rows, cols)
+
+
+class _FCallback(_LsqCallback):
+    """f(x) = |r|²."""
+
+    def __init__(self, cache, n):
+        super().__init__("recon_f", cache, n, [(None, _dense(n))], [(None, _dense(1))], {"enable_fd": False})
 
     def eval(self, arg):
         r, _ = self.cache.get(arg[0], jac=False)
@@ -519,90 +541,43 @@ class _FCallback(ca.Callback):
         return self._jac
 
 
-class _JacCallback(ca.Callback):
+class _JacCallback(_LsqCallback):
+    """∂f/∂x = 2 rᵀJ (inputs: x and the nominal output f)."""
+
     def __init__(self, name, cache, n, opts):
-        ca.Callback.__init__(self)
-        self.cache, self.n = cache, n
-        self.construct(name, opts)
-
-    def get_n_in(self):
-        return 2  # x, f (nominal output)
-
-    def get_n_out(self):
-        return 1
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, 1) if i == 0 else ca.Sparsity.dense(1, 1)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, self.n)
+        super().__init__(name, cache, n, [(None, _dense(n)), (None, _dense(1))], [(None, _dense(1, n))], opts)
 
     def eval(self, arg):
         r, J = self.cache.get(arg[0])
         return [ca.DM(2.0 * (J.T @ r)).T]
 
 
-class _GradCallback(ca.Callback):
+class _GradCallback(_LsqCallback):
+    """(f, ∇f) = (|r|², 2 Jᵀr)."""
+
     def __init__(self, cache, n):
-        ca.Callback.__init__(self)
-        self.cache, self.n = cache, n
-        self.construct("recon_grad_f", {})
-
-    def get_n_in(self):
-        return 2
-
-    def get_n_out(self):
-        return 2
-
-    def get_name_in(self, i):
-        return ("x", "p")[i]
-
-    def get_name_out(self, i):
-        return ("f", "grad")[i]
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, 1) if i == 0 else ca.Sparsity.dense(0, 1)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, 1) if i == 0 else ca.Sparsity.dense(self.n, 1)
+        super().__init__("recon_grad_f", cache, n, [("x", _dense(n)), ("p", _dense(0))],
+                         [("f", _dense(1)), ("grad", _dense(n))])
 
     def eval(self, arg):
         r, J = self.cache.get(arg[0])
         return [float(r @ r), ca.DM(2.0 * (J.T @ r))]
 
 
-class _HessCallback(ca.Callback):
+class _HessCallback(_LsqCallback):
     """Gauss–Newton Hessian 2 λ_f JᵀJ (upper triangle) on a fixed sparsity pattern."""
 
     def __init__(self, cache, n, pattern):
-        ca.Callback.__init__(self)
-        self.cache, self.n = cache, n
         coo = pattern.tocoo()
         keep = coo.row <= coo.col
         r, c = coo.row[keep], coo.col[keep]
         order = np.lexsort((r, c))  # column-major, rows ascending: CasADi's CCS order
-        self.r, self.c = r[order], c[order]
-        self.sp = ca.Sparsity.triplet(n, n, self.r.tolist(), self.c.tolist())
-        self.construct("recon_hess", {})
-
-    def get_n_in(self):
-        return 4
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ("x", "p", "lam_f", "lam_g")[i]
-
-    def get_name_out(self, i):
-        return "hess_gamma_x_x"
-
-    def get_sparsity_in(self, i):
-        return [ca.Sparsity.dense(self.n, 1), ca.Sparsity.dense(0, 1), ca.Sparsity.dense(1, 1),
-                ca.Sparsity.dense(0, 1)][i]
-
-    def get_sparsity_out(self, i):
-        return self.sp
+        r, c = r[order], c[order]
+        sp = ca.Sparsity.triplet(n, n, r.tolist(), c.tolist())
+        super().__init__("recon_hess", cache, n,
+                         [("x", _dense(n)), ("p", _dense(0)), ("lam_f", _dense(1)), ("lam_g", _dense(0))],
+                         [("hess_gamma_x_x", sp)])
+        self.r, self.c, self.sp = r, c, sp
 
     def eval(self, arg):
         _, J = self.cache.get(arg[0])
