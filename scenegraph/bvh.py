@@ -28,7 +28,7 @@ from scenarios.errors import InputError, Location
 
 __all__ = [
     "BvhJoint", "BvhFile", "parse_bvh", "read_bvh", "END_SUFFIX",
-    "quat_mul", "quat_conj", "quat_rotate", "quat_from_axis_angle", "quat_to_matrix",
+    "quat_mul", "quat_rotate", "quat_from_axis_angle", "quat_to_matrix",
     "quat_slerp", "euler_channels_to_quat", "bvh_local_pose", "bvh_forward_kinematics", "resample_pose",
 ]
 
@@ -345,10 +345,6 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         aw * by - ax * bz + ay * bw + az * bx,
         aw * bz + ax * by - ay * bx + az * bw,
     ], axis=-1)
-
-
-def quat_conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:

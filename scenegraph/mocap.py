@@ -397,10 +397,6 @@ class MocapClip:
         """(T, len(names), 3) positions of our points (handles, origin:BODY, PointSpec) over the clip."""
         return point_positions(self.character, tuple(names), self.q)
 
-    def fitted_targets(self) -> np.ndarray:
-        """(T, K, 3) positions of the fitted points of ours (the clip's are ``data.targets``)."""
-        return point_positions(self.character, self.data.target_specs, self.q)
-
 
 def load_clip(path: str | os.PathLike, rig: str | os.PathLike | Rig | None = None, fps: float = 30.0,
               frames: tuple[int | None, int | None] | None = None, skip_tpose: bool | None = None,
