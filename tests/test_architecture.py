@@ -11,7 +11,11 @@ rules:
    ``scenegraph/audit.py`` and ``scenegraph/residual.py`` never import ``scenegraph.problem``;
 5. the plan is data: ``schedules/compiler.py`` and ``schedules/step.py`` import no CasADi,
    directly or through anything they import at module level (package ``__init__`` files
-   included, as Python runs them); and ``compose schedule`` really does not load it.
+   included, as Python runs them); and ``compose schedule`` really does not load it;
+6. learning (``scenegraph/nio/``) sits on top of the model: no other ``scenegraph`` module
+   imports it, and inside it each module imports only those before it in ``NIO_ORDER``;
+7. the file and version helpers ``scenarios/atomic.py`` and ``scenarios/versions.py`` import
+   nothing of the project but ``scenarios.errors``, so every layer can use them.
 """
 from __future__ import annotations
 
@@ -192,3 +196,24 @@ def test_compose_schedule_does_not_import_casadi():
     p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip().splitlines()[-1] == "NO-CASADI 0", p.stdout[-2000:]
+
+
+# the order of the computation in scenegraph/nio/ (its __init__ docstring): each module may
+# import only the modules before it
+NIO_ORDER = ("theta", "energy", "counterexamples", "records", "initial", "bundle", "gradient", "problem",
+             "target", "resynthesis", "learn")
+
+
+def test_learning_is_on_top_of_the_model_and_ordered_inside():
+    nio = {m for m in _modules() if m.startswith("scenegraph.nio.")}
+    assert nio == {f"scenegraph.nio.{n}" for n in NIO_ORDER}, sorted(nio)
+    outside = [v for v in _violations("scenegraph", "scenegraph.nio") if not v.startswith("scenegraph.nio")]
+    assert outside == []
+    backward = [f"{n} -> {t}" for i, n in enumerate(NIO_ORDER) for t in sorted(_graph()[f"scenegraph.nio.{n}"])
+                if t.startswith("scenegraph.nio.") and NIO_ORDER.index(t.rsplit(".", 1)[1]) >= i]
+    assert backward == []
+
+
+def test_file_and_version_helpers_are_leaves():
+    for m in ("scenarios.atomic", "scenarios.versions"):
+        assert _graph()[m] <= {"scenarios.errors"}, (m, sorted(_graph()[m]))
