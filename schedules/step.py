@@ -26,6 +26,7 @@ from typing import Iterable, Iterator
 
 import networkx as nx
 
+from scenarios.atomic import atomic_path, atomic_write
 from scenarios.errors import ComposeError, InputError
 
 __all__ = ["Step", "StyleTimeline", "Group", "Schedule", "Weight",
@@ -296,17 +297,18 @@ class Schedule:
         return "\n".join(lines) + "\n"
 
     def write_dot(self, path: str | Path) -> None:
-        Path(path).write_text(self.to_dot(), encoding="utf-8")
+        atomic_write(path, self.to_dot())
 
     def write_png(self, path: str | Path) -> None:
         """Render with graphviz ``dot``; InputError if graphviz is not installed."""
         exe = shutil.which("dot")
         if exe is None:
             raise InputError("graphviz `dot` is not installed: cannot write PNG (use --dot and render it elsewhere)")
-        res = subprocess.run([exe, "-Tpng", "-o", str(path)], input=self.to_dot(), text=True,
-                             capture_output=True, timeout=120)
-        if res.returncode != 0:
-            raise ComposeError(f"graphviz dot failed: {res.stderr.strip()}")
+        with atomic_path(path, suffix=".png") as tmp:
+            res = subprocess.run([exe, "-Tpng", "-o", str(tmp)], input=self.to_dot(), text=True,
+                                 capture_output=True, timeout=120)
+            if res.returncode != 0:
+                raise ComposeError(f"graphviz dot failed: {res.stderr.strip()}")
 
     def to_data(self) -> dict:
         return {

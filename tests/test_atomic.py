@@ -86,18 +86,27 @@ def test_missing_folder_is_an_input_error_unless_asked_to_create_it(tmp_path):
     assert p.read_text() == "x" and os.listdir(p.parent) == ["x.txt"]
 
 
-def test_no_other_module_renames_or_makes_temporary_files():
-    """One writer: outside scenarios/atomic.py the package calls neither ``os.replace`` /
-    ``os.rename`` / ``Path.rename`` / ``Path.replace`` (with one argument) nor ``mkstemp`` /
-    ``NamedTemporaryFile``/``mkdtemp`` (AST walk over every module)."""
-    banned = {"rename", "mkstemp", "NamedTemporaryFile", "mkdtemp"}
+def test_no_other_module_writes_renames_or_makes_temporary_files():
+    """One writer: outside scenarios/atomic.py the package calls none of ``os.replace``,
+    ``rename``, ``mkstemp``, ``NamedTemporaryFile``, ``mkdtemp``, ``write_text``,
+    ``write_bytes``, nor ``open`` with a writing mode (AST walk over every module; the run
+    lock's ``os.open`` is not a content file and is allowed)."""
+    banned = {"rename", "mkstemp", "NamedTemporaryFile", "mkdtemp", "write_text", "write_bytes"}
     offenders = []
     for pkg in ("scenarios", "scenegraph", "schedules"):
         for path in sorted((ROOT / pkg).rglob("*.py")):
             if path == ROOT / "scenarios" / "atomic.py":
                 continue
             for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-                if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
+                if not isinstance(node, ast.Call):
+                    continue
+                if isinstance(node.func, ast.Name) and node.func.id == "open":
+                    mode = node.args[1] if len(node.args) > 1 else next(
+                        (k.value for k in node.keywords if k.arg == "mode"), None)
+                    if isinstance(mode, ast.Constant) and set(str(mode.value)) & set("wax+"):
+                        offenders.append(f"{path.relative_to(ROOT)}:{node.lineno} open {mode.value!r}")
+                    continue
+                if not isinstance(node.func, ast.Attribute):
                     continue
                 name = node.func.attr
                 owner = node.func.value
