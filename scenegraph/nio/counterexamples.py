@@ -158,7 +158,8 @@ class Counterexamples:
         lam_idx = np.arange(lam_slice.start, lam_slice.stop)
         fixed = lam_idx[x[lam_idx] <= 1e-12]
         if fixed.size:
-            A = sps.vstack([A, sps.csr_matrix((np.ones(fixed.size), (np.arange(fixed.size), fixed)), shape=(fixed.size, n))])
+            pin = sps.csr_matrix((np.ones(fixed.size), (np.arange(fixed.size), fixed)), shape=(fixed.size, n))
+            A = sps.vstack([A, pin])
         m = A.shape[0]
         ridge = 1e-8 * max(1.0, float(abs(H.diagonal()).max()))
         K = sps.bmat([[H + ridge * sps.identity(n), A.T], [A, -1e-12 * sps.identity(m)]], format="csc")
