@@ -136,7 +136,8 @@ def _check_handle(v: str) -> str:
 class Ground(_Model):
     """Flat ground at z = 0."""
 
-    friction: Num = Field(1.0, gt=0.0, le=5.0, description="Coulomb friction coefficient μ (dimensionless)")
+    friction: Num = Field(0.8, gt=0.0, le=5.0, description="Coulomb friction coefficient μ of the contact "
+                                                         "forces' friction pyramid (dimensionless)")
 
 
 class Region(_Model):
@@ -470,7 +471,8 @@ class Scenario(_Model):
     timing: Literal["fixed", "free"] = Field(
         "fixed", description="free: the timewarp may stretch the whole scenario within duration_bounds; "
                              "goal times are then canonical (they move with the motion)")
-    duration_bounds: tuple[Num, Num] | None = Field(None, description="[min, max] total duration (s) with free timing")
+    duration_bounds: tuple[Num, Num] | None = Field(None, description="[min, max] total duration (s) with free timing; "
+                                                                      "default [0.5, 2] × duration")
     environment: Environment = Field(default_factory=Environment)
     characters: list[CharacterSpec] = Field(min_length=1, max_length=16)
     goals: list[Goal] = Field(default_factory=list, max_length=1000)

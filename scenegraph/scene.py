@@ -39,7 +39,7 @@ from .motion import Motion
 from .problem import Avoid, HandleTarget, Spring
 from .style import Style, default_style, load_style
 
-__all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets",
+__all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets", "goal_weight",
            "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH",
            "adversarial_plans_last", "tackle_measure", "avoid_measure", "scale_style_to_body",
            "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL", "TARGET_WEIGHT", "AVOID_WEIGHT", "START_WEIGHT"]
@@ -55,6 +55,7 @@ AVOID_MARGIN = 0.25        # m: the escape target lies this far outside the avoi
 REACH_ACCEL = 1.0          # m/s²: a tackle/avoid target asks for at most ½ a τ² of displacement, τ the
 #                            time from the start of the optimised window to the goal (reaction time)
 TORSO_BODIES = ("thorax", "abdomen")
+FREE_DURATION_RANGE = (0.5, 2.0)  # timing: free without duration_bounds: the motion lasts 0.5–2 × duration
 
 
 @dataclass(frozen=True)
@@ -123,6 +124,7 @@ class Scene:
     friction: float = 1.0
     style_refs: tuple[tuple[str, str], ...] = field(default=())  # (ref, resolved file or "built-in")
     ground: Ground = FLAT  # terrain the solver and the audit use (flat unless the scenario has slopes)
+    duration_bounds: tuple[float, float] | None = None  # s, [min, max] of the whole motion with timing: free
 
     def character(self, name: str) -> CharacterState:
         for c in self.characters:
@@ -406,7 +408,7 @@ def build_scene(scn: Scenario) -> Scene:
             couplings.append(CouplingSpec(name, c.type, tuple((r.character, r.handle) for r in c.holders),
                                           tuple(c.interval), mass=c.mass, tolerance=0.05))
 
-    ground = ground_from_environment(scn.environment)
+    ground = ground_from_environment(scn.environment, friction=scn.environment.ground.friction)
     attackers = {g.attacker for g in scn.goals if isinstance(g, TackleGoal)}
     order = sorted(scn.characters, key=lambda c: c.name in attackers)
     for spec in order:
@@ -485,8 +487,12 @@ def build_scene(scn: Scenario) -> Scene:
                                 example=_example(scn, spec, styles))
         chars.append(CharacterState(spec.name, ch, tuple(styles), tuple(steps), motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
+    bounds = None
+    if scn.timing == "free":
+        bounds = tuple(float(b) for b in scn.duration_bounds) if scn.duration_bounds else \
+            (FREE_DURATION_RANGE[0] * T, FREE_DURATION_RANGE[1] * T)
     return Scene(scn.name, T, tuple(chars), tuple(goals), tuple(couplings),
-                 float(scn.environment.ground.friction), tuple(sorted(refs.items())), ground)
+                 float(ground.friction), tuple(sorted(refs.items())), ground, bounds)
 
 
 # --- targets from the current scene ------------------------------------------------------------
@@ -594,7 +600,8 @@ def _clamp(current: np.ndarray, wanted: np.ndarray, budget: float) -> np.ndarray
     return wanted if n <= budget else current + d * (budget / n)
 
 
-def _tackle_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float = np.inf) -> list[HandleTarget]:
+def _tackle_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float = np.inf,
+                    weight: float = TARGET_WEIGHT) -> list[HandleTarget]:
     """Soft springs of a tackle for the attacker, from the target's current motion: the chest
     centre where its front touches the target's torso (on the side facing the attacker's
     approach), the chest TACKLE_SPEED_LEAD s earlier where the goal's closing speed puts it,
@@ -615,21 +622,22 @@ def _tackle_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float
     v_other = (c[1] - c[0]) / 0.01
     shift = _clamp(my, chest, budget) - chest
     chest, c = chest + shift, c + shift
-    out = [HandleTarget("chest", t, tuple(float(v) for v in chest), TARGET_WEIGHT, name=f"goal:{g.name}")]
+    out = [HandleTarget("chest", t, tuple(float(v) for v in chest), weight, name=f"goal:{g.name}")]
     for h in (lead, lead / 2):  # the approach at the goal's closing speed (two points: no last-instant lunge)
         before = chest - h * (goal_speed + float(np.dot(v_other, u3))) * u3
-        out.append(HandleTarget("chest", t - h, tuple(float(v) for v in before), TARGET_WEIGHT / 3,
+        out.append(HandleTarget("chest", t - h, tuple(float(v) for v in before), weight / 3,
                                 name=f"goal:{g.name}"))
     if hands:  # palms on the target's flanks, a little behind her chest centre
         for side, sgn in (("l", 1.0), ("r", -1.0)):
             flank = _ray_to_surface(R[1], c[1], semi, sgn * lat3)
             p = flank + sgn * lat3 * 0.03 + u3 * 0.06
-            out.append(HandleTarget(f"palm_{side}", t, tuple(float(v) for v in p), TARGET_WEIGHT / 3,
+            out.append(HandleTarget(f"palm_{side}", t, tuple(float(v) for v in p), weight / 3,
                                     name=f"goal:{g.name}"))
     return out
 
 
-def _avoid_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float = np.inf) -> list[HandleTarget]:
+def _avoid_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float = np.inf,
+                   weight: float = AVOID_WEIGHT) -> list[HandleTarget]:
     """Soft escape springs of an avoid goal, from the other's current motion.
 
     The pelvis and chest that are inside the sphere (+ AVOID_MARGIN) at the goal time are
@@ -660,35 +668,50 @@ def _avoid_targets(scene: Scene, g: GoalSpec, me: CharacterState, budget: float 
         b = float(np.dot(w, u))
         s_ = -b + math.sqrt(max(b * b - (float(np.dot(w, w)) - need * need), 0.0))
         d = _clamp(p, p + s_ * u, budget) - p
-        out.append(HandleTarget(hd, float(t), tuple(float(x) for x in p + d), AVOID_WEIGHT, name=f"goal:{g.name}"))
+        out.append(HandleTarget(hd, float(t), tuple(float(x) for x in p + d), weight, name=f"goal:{g.name}"))
     return out
 
 
-def goal_targets(scene: Scene, character: str, goal_names, window: tuple[float, float] | None = None
-                 ) -> tuple[tuple[HandleTarget, ...], tuple[Avoid, ...]]:
-    """Solver terms for the named goals that bind ``character``, from the current Scene.
+def goal_weight(g: GoalSpec) -> float:
+    """The spring weight a goal gets when its caller gives none (the compiler writes the same
+    numbers into each Step: scenarios/weights.py): AVOID_WEIGHT for avoid, else TARGET_WEIGHT."""
+    return AVOID_WEIGHT if g.type == "avoid" else TARGET_WEIGHT
 
-    ``window``: the optimised world-time window (None: the whole motion); tackle and avoid
-    targets ask for no more than the reaction time from its start allows (:func:`reach_budget`)."""
+
+def goal_targets(scene: Scene, character: str, goals, window: tuple[float, float] | None = None
+                 ) -> tuple[tuple[HandleTarget, ...], tuple[Avoid, ...]]:
+    """Solver terms for the goals that bind ``character``, from the current Scene.
+
+    ``goals``: a mapping goal name → weight (a Step's ``goal:<name>`` terms: a spring weight in
+    1/m² of the normalised objective, or ``"hard"`` for an equality), or goal names (weights
+    :func:`goal_weight`).  A tackle's approach and palm springs weigh a third of its chest
+    spring.  ``window``: the optimised world-time window (None: the whole motion); tackle and
+    avoid targets ask for no more than the reaction time from its start allows
+    (:func:`reach_budget`).  Footprints are footsteps, not targets (the Scene holds them)."""
     targets, avoid = [], []
     me = scene.character(character)
-    for gname in goal_names:
+    weights = dict(goals) if isinstance(goals, dict) else {n: None for n in goals}
+    for gname, w in weights.items():
         try:
             g = scene.goal(gname)
         except KeyError:
             continue
-        if g.type == "walk_to" and g.character == character:
+        if g.character != character:
+            continue
+        hard = w == "hard"
+        wt = goal_weight(g) if w is None or hard else float(w)
+        if g.type == "walk_to":
             (x, y), _ = g.data
             z = float(handle_track(me, "pelvis", [g.time])[0][2])
-            targets.append(HandleTarget("pelvis", g.time, (float(x), float(y), z), TARGET_WEIGHT,
+            targets.append(HandleTarget("pelvis", g.time, (float(x), float(y), z), wt, hard=hard,
                                         name=f"goal:{g.name}"))
-        elif g.type == "reach" and g.character == character:
+        elif g.type == "reach":
             handle, point = g.data
-            targets.append(HandleTarget(handle, g.time, tuple(point), TARGET_WEIGHT, name=f"goal:{g.name}"))
-        elif g.type == "tackle" and g.character == character:
-            targets += _tackle_targets(scene, g, me, reach_budget(g, me, window))
-        elif g.type == "avoid" and g.character == character:
-            targets += _avoid_targets(scene, g, me, reach_budget(g, me, window))
+            targets.append(HandleTarget(handle, g.time, tuple(point), wt, hard=hard, name=f"goal:{g.name}"))
+        elif g.type == "tackle":
+            targets += [replace(t, hard=hard) for t in _tackle_targets(scene, g, me, reach_budget(g, me, window), wt)]
+        elif g.type == "avoid":
+            targets += [replace(t, hard=hard) for t in _avoid_targets(scene, g, me, reach_budget(g, me, window), wt)]
     return tuple(targets), tuple(avoid)
 
 
