@@ -310,7 +310,10 @@ class WalkToGoal(_Model):
     time: Seconds = Field(description="arrival time (s)")
     waypoints: list[Point2] = Field(default_factory=list, max_length=100,
                                     description="optional path [x, y] points (m) passed in order")
-    heading: Degrees | None = Field(None, ge=-360.0, le=360.0, description="final facing (deg); default free")
+    heading: Degrees | None = Field(None, ge=-360.0, le=360.0,
+                                   description="final facing (deg, from +X): the feet the character stands on after "
+                                               "arriving point this way; needs time left after `time` and generated "
+                                               "footsteps; default: the direction of the walk")
     tolerance: Num = Field(0.05, gt=0.0, le=10.0, description="allowed distance from the target (m)")
 
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenegraph.scene import GAITS, CharacterState, handle_track
+from scenegraph.footsteps import GAITS
+from scenegraph.scene import CharacterState, handle_track
 
 __all__ = ["transition_measures", "transition_entry", "SPEED_FRACTION"]
 
