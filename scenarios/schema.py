@@ -22,13 +22,21 @@ offending field's line and column.  Checks that need to know where the scenario 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, Strict, StringConstraints,
                       ValidationInfo, field_validator, model_validator)
 
 from .bundled import resolve_style, style_problem
 from .names import is_style_path, suggest
+from .weights import AVOID_WEIGHT, TARGET_WEIGHT
+
+_EPS = 1e-9  # s
+
+
+def _meets(iv, w) -> bool:
+    """Closed intervals iv and w (s) share a point."""
+    return iv[0] <= w[1] + _EPS and w[0] <= iv[1] + _EPS
 
 __all__ = [
     "Scenario", "CharacterSpec", "BodySpec", "ExtraMass", "LockedJoint", "RangeOfMotion", "StartSpec",
@@ -299,6 +307,13 @@ class FootprintsGoal(_Model):
             last[fp.foot] = (i, fp.time)
         return self
 
+    # plan facts (the compiler, no CasADi): active in a window, and how it is enforced
+    plan_weight: ClassVar[float | str | None] = "hard"  # footprints are hard constraints of every subproblem
+
+    def active(self, window: tuple[float, float]) -> bool:
+        """A footprint's contact interval meets the window (canonical s)."""
+        return any(_meets(fp.time, window) for fp in self.steps)
+
 
 class WalkToGoal(_Model):
     """Walk to a point by a time, footprints chosen by the optimisation."""
@@ -316,6 +331,12 @@ class WalkToGoal(_Model):
                                                "footsteps; default: the direction of the walk")
     tolerance: Num = Field(0.05, gt=0.0, le=10.0, description="allowed distance from the target (m)")
 
+    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT  # a soft pelvis spring (scenarios/weights.py)
+
+    def active(self, window: tuple[float, float]) -> bool:
+        """The walk (and its waypoints) happens over [0, time]."""
+        return window[0] <= self.time + _EPS
+
 
 class ReachGoal(_Model):
     """Bring a handle to a point at a time."""
@@ -329,6 +350,11 @@ class ReachGoal(_Model):
     tolerance: Num = Field(0.02, gt=0.0, le=10.0, description="allowed distance (m)")
 
     check_handle = field_validator("handle")(_check_handle)
+
+    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return _meets((self.time, self.time), window)
 
 
 class TackleGoal(_Model):
@@ -348,6 +374,16 @@ class TackleGoal(_Model):
     plans_last: str | None = Field(None, description="who optimises last in the decreasing-horizon schedule "
                                                      "(attacker or target name); default: the attacker")
 
+    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return _meets((self.time, self.time), window)
+
+    @property
+    def opponents(self) -> tuple[str, str]:
+        """(who acts, the other); by default the first plans last."""
+        return (self.attacker, self.target)
+
 
 class AvoidGoal(_Model):
     """Stay outside a sphere around another character at a time."""
@@ -359,6 +395,16 @@ class AvoidGoal(_Model):
     radius: Num = Field(gt=0.0, le=20.0, description="sphere radius around the other's chest (m)")
     time: Seconds = Field(description="when the distance must exceed the radius (s)")
     plans_last: str | None = Field(None, description="who optimises last (one of the pair); default: the attacker")
+
+    plan_weight: ClassVar[float | str | None] = AVOID_WEIGHT
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return _meets((self.time, self.time), window)
+
+    @property
+    def opponents(self) -> tuple[str, str]:
+        """(the one avoided, who avoids); by default the first (the attacker) plans last."""
+        return (self.around, self.character)
 
 
 class StyleChangeGoal(_Model):
@@ -374,6 +420,11 @@ class StyleChangeGoal(_Model):
     gait: Literal["walk", "run"] | None = Field(
         None, description="gait of generated footsteps after the change (run: flight phases, longer and "
                           "quicker steps); default: unchanged")
+
+    plan_weight: ClassVar[float | str | None] = None  # no solver term: the compiler's style timeline carries it
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return False
 
 
 Goal = Annotated[Union[FootprintsGoal, WalkToGoal, ReachGoal, TackleGoal, AvoidGoal, StyleChangeGoal],

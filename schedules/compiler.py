@@ -51,9 +51,8 @@ from dataclasses import dataclass, field
 import networkx as nx
 
 from scenarios.errors import InputError
-from scenarios.schema import (AvoidGoal, FootprintsGoal, HandHold, ReachGoal, Scenario, ScheduleSpec,
-                              StyleChangeGoal, TackleGoal, WalkToGoal)
-from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
+from scenarios.schema import FootprintsGoal, HandHold, Scenario, ScheduleSpec, StyleChangeGoal, TackleGoal
+from scenarios.weights import START_WEIGHT
 
 from .step import (COUPLED, DECREASING_HORIZON, FREE, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)
@@ -97,10 +96,6 @@ class _Block:
 
 def _overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
     return a[0] < b[1] - EPS and b[0] < a[1] - EPS
-
-
-def _touches(t: float, w: tuple[float, float]) -> bool:
-    return w[0] - EPS <= t <= w[1] + EPS
 
 
 def _interval_meets(iv: tuple[float, float], w: tuple[float, float]) -> bool:
@@ -179,14 +174,11 @@ def _structure(scn: Scenario) -> _Structure:
     style_changes: dict[str, list] = {n: [] for n in names}
     pair_last: dict[frozenset, list[tuple[str | None, str]]] = {}
     for gname, goal in scn.named_goals():
-        if isinstance(goal, TackleGoal):
-            goals_of[goal.attacker].append((gname, goal))
-            link(goal.attacker, goal.target, "adversarial", gname)
-            pair_last.setdefault(frozenset((goal.attacker, goal.target)), []).append((goal.plans_last, goal.attacker))
-        elif isinstance(goal, AvoidGoal):
-            goals_of[goal.character].append((gname, goal))
-            link(goal.character, goal.around, "adversarial", gname)
-            pair_last.setdefault(frozenset((goal.character, goal.around)), []).append((goal.plans_last, goal.around))
+        pair = getattr(goal, "opponents", None)  # adversarial kinds: (default planner-last, the other)
+        if pair is not None:
+            goals_of[goal.attacker if isinstance(goal, TackleGoal) else goal.character].append((gname, goal))
+            link(pair[0], pair[1], "adversarial", gname)
+            pair_last.setdefault(frozenset(pair), []).append((goal.plans_last, pair[0]))
         elif isinstance(goal, StyleChangeGoal):
             style_changes[goal.character].append(goal)
         else:
@@ -248,24 +240,6 @@ def _free_footprints(st: _Structure, ch: str, window: tuple[float, float]) -> bo
     return not any(a <= window[0] + EPS and window[1] - EPS <= b for a, b in spans)
 
 
-def _goal_active(goal, window: tuple[float, float]) -> bool:
-    if isinstance(goal, FootprintsGoal):
-        return any(_interval_meets(fp.time, window) for fp in goal.steps)
-    if isinstance(goal, WalkToGoal):  # the walk (and its waypoints) happens over [0, time]
-        return window[0] <= goal.time + EPS
-    if isinstance(goal, (ReachGoal, TackleGoal, AvoidGoal)):
-        return _touches(goal.time, window)
-    return False
-
-
-def _goal_weight(goal) -> object:
-    """How the executor enforces a goal: footprints are hard constraints; walk_to, reach and
-    tackle are soft springs of weight TARGET_WEIGHT, avoid of AVOID_WEIGHT (scene.goal_targets)."""
-    if isinstance(goal, FootprintsGoal):
-        return HARD
-    return AVOID_WEIGHT if isinstance(goal, AvoidGoal) else TARGET_WEIGHT
-
-
 def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ...]:
     T = st.scn.duration
     w = b.window
@@ -281,8 +255,8 @@ def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ..
     couplings: dict[str, object] = {}
     for ch in b.characters:
         for gname, goal in st.goals_of[ch]:
-            if _goal_active(goal, w):
-                goals[f"goal:{gname}"] = _goal_weight(goal)
+            if goal.active(w):  # the goal kind's plan facts (scenarios/schema.py)
+                goals[f"goal:{gname}"] = goal.plan_weight
         for cname, c, members in st.couplings_of[ch]:
             if not _interval_meets(c.interval, w):
                 continue
@@ -434,7 +408,7 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
         last = [m for m in order if m in st.plans_last]
         reasons.append(f"plans last: {', '.join(last) or order[-1]}")
 
-    t_event = max([g.time for m in members for _, g in st.goals_of[m] if isinstance(g, (TackleGoal, AvoidGoal))],
+    t_event = max([g.time for m in members for _, g in st.goals_of[m] if hasattr(g, "opponents")],
                   default=T)
     reps = {m: spec.solves_per_cycle.get(m, 1) if mode == "coupled" else 1 for m in members}
     sched = tuple(kinds)

@@ -9,7 +9,9 @@ rules:
 3. ``scenegraph`` (the model, the world and the solver) never imports ``schedules``;
 4. the physics audit and the residual kernels never see the transcription:
    ``scenegraph/audit.py`` and ``scenegraph/residual.py`` never import ``scenegraph.problem``;
-5. the plan is data: ``schedules/compiler.py`` and ``schedules/step.py`` import no CasADi,
+5. goal and coupling records (``scenegraph/goals``) and the measures they use
+   (``scenegraph/measure.py``) never import the Scene (``scenegraph.scene`` builds them);
+6. the plan is data: ``schedules/compiler.py`` and ``schedules/step.py`` import no CasADi,
    directly or through anything they import at module level (package ``__init__`` files
    included, as Python runs them); and ``compose schedule`` really does not load it.
 """
@@ -176,6 +178,12 @@ def test_model_never_imports_the_plan():
 def test_audit_and_residual_never_see_the_transcription():
     bad = [f"{m} -> {t}" for m in ("scenegraph.audit", "scenegraph.residual")
            for t in sorted(_imports(m)[0]) if t == "scenegraph.problem" or t.startswith("scenegraph.problem.")]
+    assert bad == []
+
+
+def test_goal_records_never_import_the_scene():
+    bad = [f"{m} -> {t}" for m in _modules() if m == "scenegraph.measure" or m.startswith("scenegraph.goals")
+           for t in sorted(_imports(m)[0]) if t == "scenegraph.scene"]
     assert bad == []
 
 

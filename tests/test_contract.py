@@ -245,3 +245,19 @@ def test_walk_to_heading_without_time_to_stand_is_rejected_with_its_location():
     with pytest.raises(InputError) as e:
         build_scene(scn)
     assert str(e.value).startswith("walk_to_variant.yaml:15:14 goals[0].heading")
+
+
+@pytest.mark.slow
+def test_the_executor_solves_a_hard_hand_hold_jointly(monkeypatch):
+    """solve_step on the full step of ``schedule.kind: timewarp``: one joint NLP (scenegraph/joint.py)
+    for both characters (3 IPOPT iterations: the plumbing, not the optimum; ~80 s to build)."""
+    from schedules.executor import solve_step
+    monkeypatch.setenv("COMPOSE_MAX_ITER", "3")
+    scn = _variant("handhold", "schedule:\n  kind: timewarp\n")
+    scene = build_scene(scn)
+    full = compile_schedule(scn).order()[-1]
+    out = solve_step(scene, full, ())
+    a, c = out["characters"]["adult"], out["characters"]["child"]
+    assert a["iterations"] == c["iterations"] == 3 and a["status"] == c["status"]  # one solve
+    assert a["violations"]["coupling:hold"] == c["violations"]["coupling:hold"]  # the joint hand gap
+    assert "palm_r" in a["contact_forces"] and "palm_l" in c["contact_forces"]  # the hand force reported
