@@ -38,6 +38,13 @@ def _meets(iv, w) -> bool:
     """Closed intervals iv and w (s) share a point."""
     return iv[0] <= w[1] + _EPS and w[0] <= iv[1] + _EPS
 
+
+class _AtTime:
+    """Plan fact of a goal that holds at one instant ``time``: active in windows containing it."""
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return _meets((self.time, self.time), window)
+
 __all__ = [
     "Scenario", "CharacterSpec", "BodySpec", "ExtraMass", "LockedJoint", "RangeOfMotion", "StartSpec",
     "Environment", "Ground", "Slope", "Region",
@@ -338,7 +345,7 @@ class WalkToGoal(_Model):
         return window[0] <= self.time + _EPS
 
 
-class ReachGoal(_Model):
+class ReachGoal(_AtTime, _Model):
     """Bring a handle to a point at a time."""
 
     type: Literal["reach"]
@@ -353,11 +360,8 @@ class ReachGoal(_Model):
 
     plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
 
-    def active(self, window: tuple[float, float]) -> bool:
-        return _meets((self.time, self.time), window)
 
-
-class TackleGoal(_Model):
+class TackleGoal(_AtTime, _Model):
     """Hit the target's torso at a time and speed, hands around it."""
 
     type: Literal["tackle"]
@@ -376,16 +380,13 @@ class TackleGoal(_Model):
 
     plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
 
-    def active(self, window: tuple[float, float]) -> bool:
-        return _meets((self.time, self.time), window)
-
     @property
     def opponents(self) -> tuple[str, str]:
         """(who acts, the other); by default the first plans last."""
         return (self.attacker, self.target)
 
 
-class AvoidGoal(_Model):
+class AvoidGoal(_AtTime, _Model):
     """Stay outside a sphere around another character at a time."""
 
     type: Literal["avoid"]
@@ -397,9 +398,6 @@ class AvoidGoal(_Model):
     plans_last: str | None = Field(None, description="who optimises last (one of the pair); default: the attacker")
 
     plan_weight: ClassVar[float | str | None] = AVOID_WEIGHT
-
-    def active(self, window: tuple[float, float]) -> bool:
-        return _meets((self.time, self.time), window)
 
     @property
     def opponents(self) -> tuple[str, str]:

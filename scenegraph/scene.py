@@ -28,23 +28,27 @@ from scenarios.schema import (AvoidGoal, FootprintsGoal, Scenario, StyleChangeGo
 from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT  # re-exported: goal/start spring weights
 
 from .body import PRESETS, Character, make_character
-from .footsteps import (CADENCE, FOOT_WIDTH, GAITS, STANCE_FRACTION, Footstep, Gait,  # noqa: F401 (re-exported)
-                        foot_length, gait_footsteps, standing_footsteps, walk_footsteps)
+from .footsteps import (CADENCE, FOOT_WIDTH, GAITS, STANCE_FRACTION, Footstep, Gait, foot_length, gait_footsteps,
+                        standing_footsteps, walk_footsteps)
 from .gait import initial_motion, style_gait
 from .ground import FLAT, Ground, ground_from_environment
 from .motion import Motion
 from .goals import Coupling, GoalRecord, coupling_records, goal_records
-from .goals.tackle import TACKLE_CONTACT_TOL, TACKLE_SPEED_LEAD, TACKLE_SPEED_TOL  # re-exported
-from .goals.avoid import AVOID_MARGIN  # noqa: F401  (re-exported)
-from .measure import (REACH_ACCEL, TORSO_BODIES, avoid_measure, body_frames, chest_front, handle_track,  # noqa: F401
-                      reach_budget, tackle_measure, torso_distance)
+from .goals.avoid import AVOID_MARGIN
+from .goals.tackle import TACKLE_CONTACT_TOL, TACKLE_SPEED_LEAD, TACKLE_SPEED_TOL
+from .measure import (REACH_ACCEL, TORSO_BODIES, avoid_measure, body_frames, chest_front, handle_track, reach_budget,
+                      tackle_measure, torso_distance)
 from .problem import Avoid, HandleTarget, Spring
 from .style import Style, default_style, load_style
 
 __all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets", "goal_weight",
            "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH",
            "adversarial_plans_last", "tackle_measure", "avoid_measure", "scale_style_to_body",
-           "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL", "TARGET_WEIGHT", "AVOID_WEIGHT", "START_WEIGHT"]
+           "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL", "TARGET_WEIGHT", "AVOID_WEIGHT", "START_WEIGHT",
+           # re-exported from scenegraph.measure / scenegraph.goals / scenegraph.footsteps for callers
+           "body_frames", "chest_front", "torso_distance", "reach_budget", "GAITS", "Gait", "foot_length",
+           "gait_footsteps", "walk_footsteps", "standing_footsteps", "TACKLE_SPEED_LEAD", "AVOID_MARGIN",
+           "REACH_ACCEL", "TORSO_BODIES"]
 
 FREE_DURATION_RANGE = (0.5, 2.0)  # timing: free without duration_bounds: the motion lasts 0.5–2 × duration
 

@@ -35,8 +35,7 @@ from scenegraph.problem import HandleTarget, Subproblem, window_mask
 from scenegraph.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.style import Style
 
-from .step import FREE, FREE_BLOCKS, FULL, HARD, NUMBER, RELAXED, ROLES, STEP_KINDS, TERM_PREFIXES, TERMS, Step, \
-    vocabulary
+from .step import FREE, FULL, HARD, RELAXED, ROLES, STEP_KINDS, Step, vocabulary
 
 __all__ = ["lower", "lower_joint", "check_step", "HANDLED", "Lowered", "STALL_ITERATIONS", "SOFT_PIN_HZ",
            "COUPLING_TARGET_HZ", "JOINT_COUPLING_HZ", "iteration_cap", "COUPLED_FULL_MAX_ITER"]

@@ -14,9 +14,9 @@ import numpy as np
 
 from scenarios.weights import AVOID_WEIGHT
 
-from ..measure import avoid_measure, clamp, handle_track, horizontal_unit, reach_budget
+from ..measure import avoid_measure, clamp, handle_track, horizontal_unit
 from ..problem import HandleTarget
-from .base import GoalRecord, where_of
+from .base import AdversarialGoal, where_of
 from .tackle import adversarial
 
 __all__ = ["Avoid", "avoid_targets", "avoid_entry", "AVOID_MARGIN"]
@@ -26,7 +26,7 @@ AVOID_MARGIN = 0.25        # m: the escape target lies this far outside the avoi
 
 
 @dataclass(frozen=True, kw_only=True)
-class Avoid(GoalRecord):
+class Avoid(AdversarialGoal):
     """radius: m, around the other's chest."""
 
     kind = "avoid"
@@ -37,14 +37,8 @@ class Avoid(GoalRecord):
         return cls(name=name, character=g.character, partner=g.around, time=float(g.time), tolerance=1e-3,
                    where=where_of(scn, ("goals", j), name), plans_last=plans_last, radius=float(g.radius))
 
-    @property
-    def expected_to_hold(self) -> bool:
-        return self.plans_last == self.character
-
-    def targets(self, scene, me, weight, window, hard: bool = False) -> list:
-        from dataclasses import replace
-        out = avoid_targets(scene, self, me, reach_budget(self, me, window), weight)
-        return [replace(t, hard=True) for t in out] if hard else out
+    def springs(self, scene, me, budget: float, weight: float) -> list:
+        return avoid_targets(scene, self, me, budget, weight)
 
     def entry(self, scene, audits) -> dict:
         return avoid_entry(self, avoid_measure(scene.character(self.character), scene.character(self.partner),

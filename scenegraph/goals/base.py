@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-__all__ = ["GoalRecord", "Marker", "where_of", "violated_by"]
+__all__ = ["GoalRecord", "AdversarialGoal", "Marker", "where_of", "violated_by"]
 
 Marker = tuple[str, tuple[float, float, float], float]  # (name, world position m, radius m)
 
@@ -90,3 +90,26 @@ class GoalRecord:
         e = {"type": self.kind, "what": what, "measured": measured, "tolerance": self.tolerance, "unit": unit,
              "holds": bool(holds), **extra, "where": self.where}
         return e
+
+
+@dataclass(frozen=True, kw_only=True)
+class AdversarialGoal(GoalRecord):
+    """A goal against ``partner`` (tackle, avoid): solved by the decreasing-horizon schedule,
+    where the side that plans last wins; its soft springs ask for no more than the reaction
+    time left in the window allows (:func:`scenegraph.measure.reach_budget`)."""
+
+    @property
+    def expected_to_hold(self) -> bool:
+        return self.plans_last == self.character
+
+    def springs(self, scene, me, budget: float, weight: float) -> list:
+        """The kind's soft targets within ``budget`` (m) of movement."""
+        raise NotImplementedError
+
+    def targets(self, scene, me, weight, window, hard: bool = False) -> list:
+        from dataclasses import replace
+
+        from ..measure import reach_budget
+        out = self.springs(scene, me, reach_budget(self, me, window), weight)
+        return [replace(t, hard=True) for t in out] if hard else out
+

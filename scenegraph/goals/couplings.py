@@ -61,14 +61,19 @@ class Coupling:
                 "measured": d, "tolerance": c.tolerance, "unit": "m", "holds": d <= c.tolerance, "where": c.where}
 
 
+def _common(name: str, refs, c, scn, i: int) -> dict:
+    """The fields every coupling record takes from its schema model ``couplings[i]``."""
+    return {"name": name, "handles": tuple((r.character, r.handle) for r in refs),
+            "interval": (float(c.interval[0]), float(c.interval[1])), "where": where_of(scn, ("couplings", i), name)}
+
+
 @dataclass(frozen=True, kw_only=True)
 class HandHold(Coupling):
     kind = "hand_hold"
 
     @classmethod
     def from_schema(cls, name: str, c, scn, i: int) -> "HandHold":
-        return cls(name=name, handles=tuple((r.character, r.handle) for r in c.between),
-                   interval=(float(c.interval[0]), float(c.interval[1])), where=where_of(scn, ("couplings", i), name))
+        return cls(**_common(name, c.between, c, scn, i))
 
     def springs(self, scene, character: str, stiffness: float, window, rate: float = 60.0) -> tuple:
         return coupling_springs(scene, character, self, stiffness, window, rate)
@@ -80,9 +85,7 @@ class Carry(Coupling):
 
     @classmethod
     def from_schema(cls, name: str, c, scn, i: int) -> "Carry":
-        return cls(name=name, handles=tuple((r.character, r.handle) for r in c.holders),
-                   interval=(float(c.interval[0]), float(c.interval[1])), mass=float(c.mass), tolerance=CARRY_TOL,
-                   where=where_of(scn, ("couplings", i), name))
+        return cls(**_common(name, c.holders, c, scn, i), mass=float(c.mass), tolerance=CARRY_TOL)
 
 
 COUPLING_KINDS = {k.kind: k for k in (HandHold, Carry)}

@@ -15,10 +15,9 @@ import numpy as np
 
 from scenarios.weights import TARGET_WEIGHT
 
-from ..measure import (body_frames, clamp, handle_track, horizontal_unit, ray_to_surface, reach_budget,
-                       tackle_measure)
+from ..measure import body_frames, clamp, handle_track, horizontal_unit, ray_to_surface, tackle_measure
 from ..problem import HandleTarget
-from .base import GoalRecord, where_of
+from .base import AdversarialGoal, where_of
 
 __all__ = ["Tackle", "tackle_targets", "tackle_entry", "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL",
            "TACKLE_SPEED_LEAD"]
@@ -39,7 +38,7 @@ def adversarial(g, entry: dict) -> dict:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Tackle(GoalRecord):
+class Tackle(AdversarialGoal):
     """min_speed, speed: m/s (closing speed; ``speed`` None: at least min_speed); hands_around_torso."""
 
     kind = "tackle"
@@ -54,14 +53,8 @@ class Tackle(GoalRecord):
                    min_speed=float(g.min_speed), hands_around_torso=bool(g.hands_around_torso),
                    speed=None if g.speed is None else float(g.speed))
 
-    @property
-    def expected_to_hold(self) -> bool:
-        return self.plans_last == self.character
-
-    def targets(self, scene, me, weight, window, hard: bool = False) -> list:
-        from dataclasses import replace
-        out = tackle_targets(scene, self, me, reach_budget(self, me, window), weight)
-        return [replace(t, hard=True) for t in out] if hard else out
+    def springs(self, scene, me, budget: float, weight: float) -> list:
+        return tackle_targets(scene, self, me, budget, weight)
 
     def entry(self, scene, audits) -> dict:
         m = tackle_measure(scene.character(self.character), scene.character(self.partner), self.time)
