@@ -113,6 +113,22 @@ class Scene:
                 return c
         raise KeyError(name)
 
+    def world_time(self, who: str, t: float) -> float:
+        """World time (s) of the goal time ``t`` of character ``who``.  With fixed timing goal
+        times are world times (``t``).  With ``timing: free`` they are canonical: the world time
+        of s = t / duration on the character's current timewarp, so a goal moves with the
+        motion when a timing step stretches it."""
+        if self.duration_bounds is None:
+            return float(t)
+        m = self.character(who).motion
+        return float(np.asarray(m.time([min(max(float(t) / self.duration, 0.0), 1.0)])).ravel()[0])
+
+    def goal_at_world_time(self, g: GoalRecord) -> GoalRecord:
+        """``g`` with its time in world seconds (:meth:`world_time`; unchanged with fixed timing)."""
+        if g.time is None or self.duration_bounds is None:
+            return g
+        return replace(g, time=self.world_time(g.character, g.time))
+
     def with_motion(self, name: str, motion: Motion, footsteps: tuple[Footstep, ...] | None = None) -> "Scene":
         chars = tuple(replace(c, motion=motion, footsteps=c.footsteps if footsteps is None else tuple(footsteps))
                       if c.name == name else c for c in self.characters)
@@ -362,6 +378,7 @@ def goal_targets(scene: Scene, character: str, goals, window: tuple[float, float
         if g.character != character:
             continue
         hard = w == "hard"
+        g = scene.goal_at_world_time(g)
         targets += g.targets(scene, me, goal_weight(g) if w is None or hard else float(w), window, hard=hard) \
             if g.type != "footprints" else []
     return tuple(targets), ()

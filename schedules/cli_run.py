@@ -61,7 +61,7 @@ AUDIT_TOLERANCES = {"footstep_tol": 5e-3, "penetration_tol": 1e-2, "friction_tol
 def goal_report(scene, contact_audits: dict | None = None) -> tuple[dict, dict]:
     """({goal: {holds, measured, tolerance, unit, what, where}}, {coupling: {...}}) from the final
     Scene: each goal and coupling record measures itself (scenegraph.goals)."""
-    goals = {g.name: g.entry(scene, contact_audits) for g in scene.goals}
+    goals = {g.name: scene.goal_at_world_time(g).entry(scene, contact_audits) for g in scene.goals}
     couplings = {c.name: c.entry(scene) for c in scene.couplings}
     return goals, couplings
 

@@ -261,3 +261,33 @@ def test_the_executor_solves_a_hard_hand_hold_jointly(monkeypatch):
     assert a["iterations"] == c["iterations"] == 3 and a["status"] == c["status"]  # one solve
     assert a["violations"]["coupling:hold"] == c["violations"]["coupling:hold"]  # the joint hand gap
     assert "palm_r" in a["contact_forces"] and "palm_l" in c["contact_forces"]  # the hand force reported
+
+
+def test_free_timing_keeps_goal_times_canonical():
+    """With ``timing: free`` a goal time is canonical: when a timing step stretches the motion to
+    2 s, the walk_to target (1.4 s of a 1.4 s scene) moves to the new end; with fixed timing
+    a goal time is a world time and stays."""
+    from scenegraph.motion import Motion
+    for text, expect_end in (("timing: free\nduration_bounds: [1.0, 2.0]\n", 2.0), ("", 1.4)):
+        scn = _variant("walk_to", text, replace_=("time: 1.4", "time: 1.0"))  # arrive at 1.0 of 1.4 s
+        scene = build_scene(scn)
+        m = scene.character("walker").motion
+        stretched = Motion(m.ctrl, tuple(float(w) * 2.0 / 1.4 for w in m.warp))  # the same motion over 2 s
+        scene = scene.with_motion("walker", stretched)
+        step = compile_schedule(scn).order()[-1]
+        sp, _ = lower(scene, step, "walker")
+        (goal,) = [t for t in sp.targets if t.name == "goal:walk_to_0"]
+        assert goal.t == pytest.approx(1.0 * (expect_end / 1.4))
+
+
+@pytest.mark.slow
+def test_free_timing_changes_the_solved_duration():
+    """The timing step of walk_to with ``timing: free`` (bounds [1, 2] s) moves the end of the
+    motion off the written 1.4 s (measured 2026-12-02: to 1.528 s, Solve_Succeeded in 54
+    iterations, ~45 s); with fixed timing the end is held by an equality (see above)."""
+    from schedules.executor import solve_step
+    scn = _variant("walk_to", "timing: free\nduration_bounds: [1.0, 2.0]\n")
+    timing = compile_schedule(scn).order()[0]
+    c = solve_step(build_scene(scn), timing, ("walker",))["characters"]["walker"]
+    assert c["success"], c["status"]
+    assert 1.0 - 1e-6 <= c["warp"][-1] <= 2.0 + 1e-6 and abs(c["warp"][-1] - 1.4) > 0.02
