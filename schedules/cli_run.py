@@ -23,7 +23,7 @@ from scenarios.errors import InputError, Location
 from scenarios.loader import find_scenario, load_scenario
 
 __all__ = ["register", "run_scenario", "goal_report", "goal_verdict", "tackle_entry", "avoid_entry",
-           "violation_line"]
+           "violation_line", "extra_mass_entries"]
 
 
 def _versions() -> dict:
@@ -174,7 +174,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
             "jobs": jobs, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
             "steps": [r.to_dict() for r in result.records],
             "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
-                                    "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}
+                                    "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps),
+                                    "extra_masses": extra_mass_entries(scn, c.name)}
                            for c in final.characters},
             "goals": goals, "couplings": couplings,
             **goal_verdict(goals, couplings),
@@ -227,6 +228,13 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
                       f"{a['penetration_max'] * 1000:.1f} mm, friction {a['friction_violation_max']:.3g} N "
                       f"(tolerances {AUDIT_TOLERANCES}); outputs written for inspection", file=log, flush=True)
         return rep
+
+
+def extra_mass_entries(scn, character: str) -> list[dict]:
+    """The point masses a character carries, as the report lists them: handle, mass (kg) and
+    the scenario's ``label`` (what it is)."""
+    return [{"handle": em.handle, "mass": float(em.mass), "label": em.label}
+            for em in scn.character(character).body.extra_masses]
 
 
 def violation_line(what: str, e: dict) -> str:

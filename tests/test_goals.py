@@ -71,3 +71,10 @@ def test_every_entry_of_a_bundled_scene_has_a_where(name):
     for e in [*goals.values(), *couplings.values()]:
         assert re.search(rf"{name}\.yaml:\d+:\d+ (goals|couplings)\[\d+\] \(\w+\)$", e["where"])
         assert isinstance(e["holds"], bool)
+
+
+def test_an_extra_mass_label_reaches_the_report():
+    from schedules.cli_run import extra_mass_entries
+    assert extra_mass_entries(load_scenario("suitcase"), "walker") == [
+        {"handle": "palm_r", "mass": 3.0, "label": "suitcase"}]
+    assert extra_mass_entries(load_scenario("walk"), "walker") == []
