@@ -25,7 +25,7 @@ import numpy as np
 from scenarios.errors import InputError
 from scenarios.schema import (AvoidGoal, FootprintsGoal, Scenario, StyleChangeGoal, TackleGoal, WalkToGoal,
                               joint_dofs)
-from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT  # re-exported: goal/start spring weights
+from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT  # noqa: F401 (re-exported)
 
 from .body import PRESETS, Character, make_character
 from .footsteps import (CADENCE, FOOT_WIDTH, GAITS, STANCE_FRACTION, Footstep, Gait, foot_length, gait_footsteps,
@@ -353,9 +353,9 @@ def build_scene(scn: Scenario) -> Scene:
 # --- targets from the current scene ------------------------------------------------------------
 
 def goal_weight(g: GoalRecord) -> float:
-    """The spring weight a goal gets when its caller gives none (the compiler writes the same
-    numbers into each Step: scenarios/weights.py): AVOID_WEIGHT for avoid, else TARGET_WEIGHT."""
-    return AVOID_WEIGHT if g.type == "avoid" else TARGET_WEIGHT
+    """The spring weight a goal gets when its caller gives none: its kind's ``default_weight``
+    (the number the compiler writes into each Step, scenarios/weights.py)."""
+    return float(g.default_weight)
 
 
 def goal_targets(scene: Scene, character: str, goals, window: tuple[float, float] | None = None
@@ -379,8 +379,7 @@ def goal_targets(scene: Scene, character: str, goals, window: tuple[float, float
             continue
         hard = w == "hard"
         g = scene.goal_at_world_time(g)
-        targets += g.targets(scene, me, goal_weight(g) if w is None or hard else float(w), window, hard=hard) \
-            if g.type != "footprints" else []
+        targets += g.targets(scene, me, goal_weight(g) if w is None or hard else float(w), window, hard=hard)
     return tuple(targets), ()
 
 

@@ -30,6 +30,7 @@ class Avoid(AdversarialGoal):
     """radius: m, around the other's chest."""
 
     kind = "avoid"
+    default_weight = AVOID_WEIGHT
     radius: float
 
     @classmethod

@@ -16,6 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from scenarios.weights import TARGET_WEIGHT
+
 __all__ = ["GoalRecord", "AdversarialGoal", "Marker", "where_of", "violated_by"]
 
 Marker = tuple[str, tuple[float, float, float], float]  # (name, world position m, radius m)
@@ -51,6 +53,7 @@ class GoalRecord:
     """
 
     kind: ClassVar[str] = ""
+    default_weight: ClassVar[float] = TARGET_WEIGHT  # spring weight without a Step's (scenarios/weights.py)
     name: str
     character: str
     time: float | None = None
@@ -69,7 +72,7 @@ class GoalRecord:
         decreasing-horizon schedule), False for the other; None for the rest."""
         return None
 
-    def targets(self, scene, me, weight: float, window) -> list:
+    def targets(self, scene, me, weight: float, window, hard: bool = False) -> list:
         """Soft (or, with ``hard``, equality) handle targets for the character's subproblem:
         ``weight`` is the Step's ``goal:<name>`` weight, ``window`` the optimised world-time
         window (None: whole).  Default: none (the goal acts through footsteps or styles)."""

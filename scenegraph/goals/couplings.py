@@ -128,7 +128,7 @@ def coupling_springs(scene, character: str, coupling: Coupling, stiffness: float
     mine = [h for who, h in c.handles if who == character]
     others = [(who, h) for who, h in c.handles if who != character]
     a, b = max(c.interval[0], window[0]), min(c.interval[1], window[1])
-    if c.type != "hand_hold" or not mine or not others or b <= a:
+    if not mine or not others or b <= a:
         return ()
     times = np.linspace(a, b, max(2, int(math.ceil((b - a) * rate)) + 1))
     return tuple(Spring(mine[0], tuple(float(t) for t in times),
