@@ -22,13 +22,28 @@ offending field's line and column.  Checks that need to know where the scenario 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, Strict, StringConstraints,
                       ValidationInfo, field_validator, model_validator)
 
 from .bundled import resolve_style, style_problem
 from .names import is_style_path, suggest
+from .weights import AVOID_WEIGHT, TARGET_WEIGHT
+
+_EPS = 1e-9  # s
+
+
+def _meets(iv, w) -> bool:
+    """Closed intervals iv and w (s) share a point."""
+    return iv[0] <= w[1] + _EPS and w[0] <= iv[1] + _EPS
+
+
+class _AtTime:
+    """Plan fact of a goal that holds at one instant ``time``: active in windows containing it."""
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return _meets((self.time, self.time), window)
 
 __all__ = [
     "Scenario", "CharacterSpec", "BodySpec", "ExtraMass", "LockedJoint", "RangeOfMotion", "StartSpec",
@@ -136,7 +151,8 @@ def _check_handle(v: str) -> str:
 class Ground(_Model):
     """Flat ground at z = 0."""
 
-    friction: Num = Field(1.0, gt=0.0, le=5.0, description="Coulomb friction coefficient μ (dimensionless)")
+    friction: Num = Field(0.8, gt=0.0, le=5.0, description="Coulomb friction coefficient μ of the contact "
+                                                         "forces' friction pyramid (dimensionless)")
 
 
 class Region(_Model):
@@ -298,6 +314,13 @@ class FootprintsGoal(_Model):
             last[fp.foot] = (i, fp.time)
         return self
 
+    # plan facts (the compiler, no CasADi): active in a window, and how it is enforced
+    plan_weight: ClassVar[float | str | None] = "hard"  # footprints are hard constraints of every subproblem
+
+    def active(self, window: tuple[float, float]) -> bool:
+        """A footprint's contact interval meets the window (canonical s)."""
+        return any(_meets(fp.time, window) for fp in self.steps)
+
 
 class WalkToGoal(_Model):
     """Walk to a point by a time, footprints chosen by the optimisation."""
@@ -309,11 +332,20 @@ class WalkToGoal(_Model):
     time: Seconds = Field(description="arrival time (s)")
     waypoints: list[Point2] = Field(default_factory=list, max_length=100,
                                     description="optional path [x, y] points (m) passed in order")
-    heading: Degrees | None = Field(None, ge=-360.0, le=360.0, description="final facing (deg); default free")
+    heading: Degrees | None = Field(None, ge=-360.0, le=360.0,
+                                   description="final facing (deg, from +X): the feet the character stands on after "
+                                               "arriving point this way; needs time left after `time` and generated "
+                                               "footsteps; default: the direction of the walk")
     tolerance: Num = Field(0.05, gt=0.0, le=10.0, description="allowed distance from the target (m)")
 
+    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT  # a soft pelvis spring (scenarios/weights.py)
 
-class ReachGoal(_Model):
+    def active(self, window: tuple[float, float]) -> bool:
+        """The walk (and its waypoints) happens over [0, time]."""
+        return window[0] <= self.time + _EPS
+
+
+class ReachGoal(_AtTime, _Model):
     """Bring a handle to a point at a time."""
 
     type: Literal["reach"]
@@ -326,8 +358,10 @@ class ReachGoal(_Model):
 
     check_handle = field_validator("handle")(_check_handle)
 
+    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
 
-class TackleGoal(_Model):
+
+class TackleGoal(_AtTime, _Model):
     """Hit the target's torso at a time and speed, hands around it."""
 
     type: Literal["tackle"]
@@ -344,8 +378,15 @@ class TackleGoal(_Model):
     plans_last: str | None = Field(None, description="who optimises last in the decreasing-horizon schedule "
                                                      "(attacker or target name); default: the attacker")
 
+    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
 
-class AvoidGoal(_Model):
+    @property
+    def opponents(self) -> tuple[str, str]:
+        """(who acts, the other); by default the first plans last."""
+        return (self.attacker, self.target)
+
+
+class AvoidGoal(_AtTime, _Model):
     """Stay outside a sphere around another character at a time."""
 
     type: Literal["avoid"]
@@ -355,6 +396,13 @@ class AvoidGoal(_Model):
     radius: Num = Field(gt=0.0, le=20.0, description="sphere radius around the other's chest (m)")
     time: Seconds = Field(description="when the distance must exceed the radius (s)")
     plans_last: str | None = Field(None, description="who optimises last (one of the pair); default: the attacker")
+
+    plan_weight: ClassVar[float | str | None] = AVOID_WEIGHT
+
+    @property
+    def opponents(self) -> tuple[str, str]:
+        """(the one avoided, who avoids); by default the first (the attacker) plans last."""
+        return (self.around, self.character)
 
 
 class StyleChangeGoal(_Model):
@@ -370,6 +418,11 @@ class StyleChangeGoal(_Model):
     gait: Literal["walk", "run"] | None = Field(
         None, description="gait of generated footsteps after the change (run: flight phases, longer and "
                           "quicker steps); default: unchanged")
+
+    plan_weight: ClassVar[float | str | None] = None  # no solver term: the compiler's style timeline carries it
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return False
 
 
 Goal = Annotated[Union[FootprintsGoal, WalkToGoal, ReachGoal, TackleGoal, AvoidGoal, StyleChangeGoal],
@@ -470,7 +523,8 @@ class Scenario(_Model):
     timing: Literal["fixed", "free"] = Field(
         "fixed", description="free: the timewarp may stretch the whole scenario within duration_bounds; "
                              "goal times are then canonical (they move with the motion)")
-    duration_bounds: tuple[Num, Num] | None = Field(None, description="[min, max] total duration (s) with free timing")
+    duration_bounds: tuple[Num, Num] | None = Field(None, description="[min, max] total duration (s) with free timing; "
+                                                                      "default [0.5, 2] × duration")
     environment: Environment = Field(default_factory=Environment)
     characters: list[CharacterSpec] = Field(min_length=1, max_length=16)
     goals: list[Goal] = Field(default_factory=list, max_length=1000)

@@ -17,7 +17,10 @@ from .body import N_DOF, N_ROOT, Character, standing_pose
 from .footsteps import Footstep
 from .motion import Motion
 
-__all__ = ["initial_motion", "leg_phase", "example_gait_pose", "phase_code", "example_poses"]
+__all__ = ["initial_motion", "leg_phase", "example_gait_pose", "phase_code", "example_poses", "style_gait",
+           "RUN_FLIGHT_FRACTION"]
+
+RUN_FLIGHT_FRACTION = 0.15  # a style whose example motion has both feet off the ground this often is a run
 
 D = np.deg2rad
 ROOT_HEIGHT = 0.95  # initial pelvis height as a fraction of the standing height
@@ -170,3 +173,18 @@ def phase_code(ph: tuple[str, float]) -> float:
 def _phase_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d = np.abs(a - b)
     return np.minimum(d, 2.0 - d)
+
+
+def style_gait(style) -> str:
+    """The gait a style moves in: ``"run"`` when the example motion it was learned from
+    (``Style.example``, phase codes: stance [0, 1), swing [1, 2)) has both legs in swing — a
+    flight phase — in at least RUN_FLIGHT_FRACTION of its samples, else ``"walk"`` (also for a
+    style without an example, like the built-in default).  Measured on the bundled styles:
+    run 31 of 47 samples in flight, walk 0/69, walk_person2 3/61, walk_stylized 1/69."""
+    ex = getattr(style, "example", None)
+    if ex is None:
+        return "walk"
+    pl, pr = np.asarray(ex.phase_l, float), np.asarray(ex.phase_r, float)
+    flight = float(np.mean((pl >= 1.0) & (pr >= 1.0))) if pl.size else 0.0
+    return "run" if flight >= RUN_FLIGHT_FRACTION else "walk"
+

@@ -22,7 +22,8 @@ import numpy as np
 from scenarios.errors import InputError, Location
 from scenarios.loader import find_scenario, load_scenario
 
-__all__ = ["register", "run_scenario", "goal_report", "goal_verdict", "tackle_entry", "avoid_entry"]
+__all__ = ["register", "run_scenario", "goal_report", "goal_verdict", "tackle_entry", "avoid_entry",
+           "violation_line", "extra_mass_entries"]
 
 
 def _versions() -> dict:
@@ -53,104 +54,23 @@ AUDIT_TOLERANCES = {"footstep_tol": 5e-3, "penetration_tol": 1e-2, "friction_tol
 
 
 def goal_report(scene, contact_audits: dict | None = None) -> tuple[dict, dict]:
-    """({goal: {holds, measured, tolerance, unit, what}}, {coupling: {...}}) from the final Scene."""
-    from scenegraph.scene import avoid_measure, handle_track, tackle_measure
-
-    from .measures import transition_entry
-
-    goals = {}
-    for g in scene.goals:
-        me = scene.character(g.character)
-        if g.type == "footprints":
-            val = (contact_audits or {}).get(g.character, {}).get("footstep_error_max")
-            tol = 0.025
-            goals[g.name] = {"type": g.type, "what": "max distance of a planted handle from its footprint, "
-                             "sampled at 120 Hz (solver enforces it exactly at collocation points)",
-                             "measured": val, "tolerance": tol, "unit": "m",
-                             "holds": bool(val is not None and val <= tol)}
-        elif g.type == "walk_to":
-            (x, y), _ = g.data
-            p = handle_track(me, "pelvis", [g.time])[0]
-            d = float(np.hypot(p[0] - x, p[1] - y))
-            goals[g.name] = {"type": g.type, "what": "horizontal pelvis distance from the target at the time",
-                             "measured": d, "tolerance": g.tolerance, "unit": "m", "holds": d <= g.tolerance}
-        elif g.type == "reach":
-            handle, point = g.data
-            d = float(np.linalg.norm(handle_track(me, handle, [g.time])[0] - np.asarray(point)))
-            goals[g.name] = {"type": g.type, "what": f"{handle} distance from the target at the time",
-                             "measured": d, "tolerance": g.tolerance, "unit": "m", "holds": d <= g.tolerance}
-        elif g.type == "tackle":
-            goals[g.name] = tackle_entry(g, tackle_measure(me, scene.character(g.partner), g.time))
-        elif g.type == "avoid":
-            goals[g.name] = avoid_entry(g, avoid_measure(me, scene.character(g.partner), g.time))
-        elif g.type == "style_change" and g.data[1] is not None:
-            goals[g.name] = transition_entry(g, me, scene.duration)
-        elif g.type == "style_change":
-            goals[g.name] = {"type": g.type, "what": "style timeline applied (θ blended across the seam)",
-                             "measured": None, "tolerance": None, "holds": True}
-    couplings = {}
-    for c in scene.couplings:
-        t = np.linspace(c.interval[0], c.interval[1], max(2, int((c.interval[1] - c.interval[0]) * 30) + 1))
-        tracks = [handle_track(scene.character(w), h, t) for w, h in c.handles]
-        centre = np.mean(tracks, axis=0)
-        d = float(max(np.linalg.norm(tr - centre, axis=1).max() for tr in tracks)) * (2 if len(tracks) == 2 else 1)
-        couplings[c.name] = {"type": c.type, "what": "max distance between the held handles over the interval"
-                             if len(tracks) == 2 else "max distance of a holder's handle from their centre",
-                             "measured": d, "tolerance": c.tolerance, "unit": "m", "holds": d <= c.tolerance}
+    """({goal: {holds, measured, tolerance, unit, what, where}}, {coupling: {...}}) from the final
+    Scene: each goal and coupling record measures itself (scenegraph.goals)."""
+    goals = {g.name: scene.goal_at_world_time(g).entry(scene, contact_audits) for g in scene.goals}
+    couplings = {c.name: c.entry(scene) for c in scene.couplings}
     return goals, couplings
 
 
-def _adversarial(g, entry: dict) -> dict:
-    """The outcome fields every tackle/avoid entry carries: who plans last, whether this goal
-    is expected to hold (its side plans last and wins by design), and a plain note."""
-    expected = bool(g.expected_to_hold)
-    entry.update({"plans_last": g.plans_last, "expected_to_hold": expected,
-                  "note": (f"{g.character} plans last: expected to hold" if expected else
-                           f"expected to FAIL by design: {g.plans_last} plans last and wins")})
-    return entry
-
-
 def tackle_entry(g, m: dict) -> dict:
-    """Report entry of a tackle goal from :func:`scenegraph.scene.tackle_measure` numbers.
-
-    Holds when the attacker's contact point (front of its chest) is within the goal's
-    tolerance (5 cm) of the target's torso surface (either side: touching, not buried) and
-    the closing speed is within ±10 % of the goal's ``speed`` (or, without one, at least
-    ``min_speed``).  The palms' distances from the torso are reported for the hands-around
-    part (``hands_around_torso``), which does not decide ``holds``."""
-    from scenegraph.scene import TACKLE_SPEED_TOL
-
-    min_speed, hands, goal_speed = g.data
-    d, v = m["contact_distance"], m["closing_speed"]
-    contact_ok = abs(d) <= g.tolerance
-    if goal_speed is not None:
-        speed_ok = abs(v - goal_speed) <= TACKLE_SPEED_TOL * goal_speed
-        speed_what = f"within ±{TACKLE_SPEED_TOL:.0%} of {goal_speed:g} m/s"
-    else:
-        speed_ok = v >= min_speed
-        speed_what = f">= min_speed {min_speed:g} m/s"
-    palms = m["palm_distances"]
-    return _adversarial(g, {
-        "type": g.type,
-        "what": "distance of the attacker's contact point (front of its chest) from the target's torso "
-                f"surface at the impact (|d| <= tolerance), and closing speed {speed_what}",
-        "measured": abs(d), "tolerance": g.tolerance, "unit": "m",
-        "contact_distance": d, "contact_holds": bool(contact_ok),
-        "speed": v, "closing_speed": v, "goal_speed": goal_speed, "min_speed": min_speed,
-        "speed_tolerance": TACKLE_SPEED_TOL * goal_speed if goal_speed is not None else None,
-        "speed_holds": bool(speed_ok),
-        "chest_to_chest": m["chest_to_chest"], "contact_point": m["contact_point"],
-        "hands_around_torso": bool(hands), "palm_torso_distances": palms,
-        "holds": bool(contact_ok and speed_ok)})
+    """Report entry of a tackle goal (:func:`scenegraph.goals.tackle.tackle_entry`)."""
+    from scenegraph.goals.tackle import tackle_entry as entry
+    return entry(g, m)
 
 
 def avoid_entry(g, clearance: float) -> dict:
-    """Report entry of an avoid goal: clearance (closest of pelvis and chest to the other's
-    chest) must be at least the sphere radius."""
-    r = g.data[0]
-    return _adversarial(g, {"type": g.type, "what": "closest pelvis/chest distance to the other's chest",
-                            "measured": clearance, "clearance": clearance, "tolerance": r, "radius": r,
-                            "unit": "m (must be >=)", "holds": bool(clearance >= r - 1e-3)})
+    """Report entry of an avoid goal (:func:`scenegraph.goals.avoid.avoid_entry`)."""
+    from scenegraph.goals.avoid import avoid_entry as entry
+    return entry(g, clearance)
 
 
 def goal_verdict(goals: dict, couplings: dict) -> dict:
@@ -234,11 +154,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
                                       (f.position[0], f.position[1], final.ground.height(*f.position)),
                                       (f.t0, f.t1), character=c.name))
         for g in final.goals:
-            if g.type == "walk_to":
-                (x, y), _ = g.data
-                markers.append(Marker(f"goal_{g.name}", "goal", (x, y, 0.05), None, 0.08, g.character))
-            elif g.type == "reach":
-                markers.append(Marker(f"goal_{g.name}", "goal", tuple(g.data[1]), None, 0.04, g.character))
+            for name, position, radius in g.markers():
+                markers.append(Marker(name, "goal", position, None, radius, g.character))
         # the energy of the final motion (the audit's Σ α Q_m² dt at the solver's contact-force
         # times): a windowed step's own energy covers its window only
         energies = {c.name: float(audits[c.name]["energy"]) for c in final.characters}
@@ -252,7 +169,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
             "jobs": jobs, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
             "steps": [r.to_dict() for r in result.records],
             "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
-                                    "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}
+                                    "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps),
+                                    "extra_masses": extra_mass_entries(scn, c.name)}
                            for c in final.characters},
             "goals": goals, "couplings": couplings,
             **goal_verdict(goals, couplings),
@@ -297,8 +215,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
                   if not e["holds"] and e.get("expected_to_hold", True)]
         failed += [(f"{c['type']} coupling {n!r}", c) for n, c in couplings.items() if not c["holds"]]
         for what, e in failed:
-            print(f"compose: {what} does NOT hold: measured {_num(e.get('measured'))}, tolerance "
-                  f"{_num(e.get('tolerance'))} {e.get('unit') or ''}".rstrip(), file=log, flush=True)
+            print(f"compose: {violation_line(what, e)}", file=log, flush=True)
         for who, a in audits.items():
             if not a["passes"]:
                 print(f"compose: physics audit FAILED for {who!r}: root residual {a['root_residual_rel']:.3g} body "
@@ -306,6 +223,27 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
                       f"{a['penetration_max'] * 1000:.1f} mm, friction {a['friction_violation_max']:.3g} N "
                       f"(tolerances {AUDIT_TOLERANCES}); outputs written for inspection", file=log, flush=True)
         return rep
+
+
+def extra_mass_entries(scn, character: str) -> list[dict]:
+    """The point masses a character carries, as the report lists them: handle, mass (kg) and
+    the scenario's ``label`` (what it is)."""
+    return [{"handle": em.handle, "mass": float(em.mass), "label": em.label}
+            for em in scn.character(character).body.extra_masses]
+
+
+def violation_line(what: str, e: dict) -> str:
+    """``<file>:<line>:<col> goals[j] (<name>): <type> goal '<name>' does NOT hold: measured …,
+    tolerance … <unit>[, violated by … m]`` for a report entry that does not hold."""
+    from scenegraph.goals import violated_by
+    at_least = "must be >=" in str(e.get("unit") or "")
+    miss = violated_by(e.get("measured"), e.get("tolerance"), at_least=at_least)
+    unit = str(e.get("unit") or "").split(" ")[0]
+    text = (f"{what} does NOT hold: measured {_num(e.get('measured'))}, tolerance {_num(e.get('tolerance'))} "
+            f"{e.get('unit') or ''}").rstrip()
+    if miss is not None:
+        text += f"; violated by {miss:.3g} {unit}".rstrip()
+    return f"{e['where']}: {text}" if e.get("where") else text
 
 
 def _num(v) -> str:

@@ -33,7 +33,9 @@ How the schedule is chosen (``schedule.kind: auto``, the default):
    (timewarp and free placements, dynamics relaxed) then a ``full`` Step (dynamics hard).
 
 An explicit ``schedule.kind`` overrides step 2: ``timewarp`` solves each branch jointly in
-one subproblem (couplings hard), ``time_layered`` solves each branch jointly per window,
+one subproblem (couplings hard: the full steps solve the two hand-holding characters in one
+NLP with the hand force as a variable, scenegraph/joint.py; the timing step times each
+character alone), ``time_layered`` solves each branch jointly per window,
 ``coupled`` and ``decreasing_horizon`` put *all* characters in one branch of that kind.
 
 Edges are derived from data dependencies in program order: a Step runs after every earlier
@@ -48,9 +50,9 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 
-from scenarios.schema import (AvoidGoal, FootprintsGoal, ReachGoal, Scenario, ScheduleSpec,
-                              StyleChangeGoal, TackleGoal, WalkToGoal)
-from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
+from scenarios.errors import InputError
+from scenarios.schema import FootprintsGoal, HandHold, Scenario, ScheduleSpec, StyleChangeGoal, TackleGoal
+from scenarios.weights import START_WEIGHT
 
 from .step import (COUPLED, DECREASING_HORIZON, FREE, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)
@@ -94,10 +96,6 @@ class _Block:
 
 def _overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
     return a[0] < b[1] - EPS and b[0] < a[1] - EPS
-
-
-def _touches(t: float, w: tuple[float, float]) -> bool:
-    return w[0] - EPS <= t <= w[1] + EPS
 
 
 def _interval_meets(iv: tuple[float, float], w: tuple[float, float]) -> bool:
@@ -176,14 +174,11 @@ def _structure(scn: Scenario) -> _Structure:
     style_changes: dict[str, list] = {n: [] for n in names}
     pair_last: dict[frozenset, list[tuple[str | None, str]]] = {}
     for gname, goal in scn.named_goals():
-        if isinstance(goal, TackleGoal):
-            goals_of[goal.attacker].append((gname, goal))
-            link(goal.attacker, goal.target, "adversarial", gname)
-            pair_last.setdefault(frozenset((goal.attacker, goal.target)), []).append((goal.plans_last, goal.attacker))
-        elif isinstance(goal, AvoidGoal):
-            goals_of[goal.character].append((gname, goal))
-            link(goal.character, goal.around, "adversarial", gname)
-            pair_last.setdefault(frozenset((goal.character, goal.around)), []).append((goal.plans_last, goal.around))
+        pair = getattr(goal, "opponents", None)  # adversarial kinds: (default planner-last, the other)
+        if pair is not None:
+            goals_of[goal.attacker if isinstance(goal, TackleGoal) else goal.character].append((gname, goal))
+            link(pair[0], pair[1], "adversarial", gname)
+            pair_last.setdefault(frozenset(pair), []).append((goal.plans_last, pair[0]))
         elif isinstance(goal, StyleChangeGoal):
             style_changes[goal.character].append(goal)
         else:
@@ -245,24 +240,6 @@ def _free_footprints(st: _Structure, ch: str, window: tuple[float, float]) -> bo
     return not any(a <= window[0] + EPS and window[1] - EPS <= b for a, b in spans)
 
 
-def _goal_active(goal, window: tuple[float, float]) -> bool:
-    if isinstance(goal, FootprintsGoal):
-        return any(_interval_meets(fp.time, window) for fp in goal.steps)
-    if isinstance(goal, WalkToGoal):  # the walk (and its waypoints) happens over [0, time]
-        return window[0] <= goal.time + EPS
-    if isinstance(goal, (ReachGoal, TackleGoal, AvoidGoal)):
-        return _touches(goal.time, window)
-    return False
-
-
-def _goal_weight(goal) -> object:
-    """How the executor enforces a goal: footprints are hard constraints; walk_to, reach and
-    tackle are soft springs of weight TARGET_WEIGHT, avoid of AVOID_WEIGHT (scene.goal_targets)."""
-    if isinstance(goal, FootprintsGoal):
-        return HARD
-    return AVOID_WEIGHT if isinstance(goal, AvoidGoal) else TARGET_WEIGHT
-
-
 def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ...]:
     T = st.scn.duration
     w = b.window
@@ -278,27 +255,39 @@ def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ..
     couplings: dict[str, object] = {}
     for ch in b.characters:
         for gname, goal in st.goals_of[ch]:
-            if _goal_active(goal, w):
-                goals[f"goal:{gname}"] = _goal_weight(goal)
+            if goal.active(w):  # the goal kind's plan facts (scenarios/schema.py)
+                goals[f"goal:{gname}"] = goal.plan_weight
         for cname, c, members in st.couplings_of[ch]:
-            if _interval_meets(c.interval, w):
-                couplings[f"coupling:{cname}"] = HARD if b.couplings == "hard" else b.stiffness
+            if not _interval_meets(c.interval, w):
+                continue
+            if b.couplings != "hard":
+                couplings[f"coupling:{cname}"] = b.stiffness
+            elif kind == FULL:  # a joint solve (scenegraph/joint.py) holds the timewarp: full steps
+                couplings[f"coupling:{cname}"] = HARD  # only; the timing step times each character alone
     terms += sorted(goals.items()) + sorted(couplings.items())
     return tuple(terms)
 
 
 def _free(st: _Structure, b: _Block, kind: str, timewarp: bool, has_hard_coupling: bool) -> tuple[str, ...]:
+    """The free blocks of a Step, each one the executor frees exactly (step.FREE_BLOCKS).
+
+    The timewarp is free in timing steps (every step without the timewarp schedule) over the
+    whole scene only: a windowed step holds the one warp its neighbours see.  A character
+    with a gait change keeps its warp too: its footstep plan times the walk and the run (a
+    free warp compressed the walk and stretched the run into one energy-optimal speed).
+    ``duration`` (``timing: free``) rides on a free timewarp; λ is free in every step."""
     free = ["q"]
-    if kind == TIMING or not timewarp:
+    whole = b.window[0] <= EPS and b.window[1] >= st.scn.duration - EPS
+    gait_change = any(c.gait is not None for ch in b.characters for c in st.style_changes[ch])
+    if (kind == TIMING or not timewarp) and whole and not gait_change:
         free.append("timewarp")
-        if st.scn.timing == "free" and b.window[1] >= st.scn.duration - EPS:
+        if st.scn.timing == "free":
             free.append("duration")
     if any(_free_footprints(st, ch, b.window) for ch in b.characters):
         free.append("footprints")
-    if kind == FULL:
-        free.append("lambda")
-        if has_hard_coupling:
-            free.append("coupling_forces")
+    free.append("lambda")
+    if has_hard_coupling:
+        free.append("coupling_forces")
     return tuple(free)
 
 
@@ -419,7 +408,7 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
         last = [m for m in order if m in st.plans_last]
         reasons.append(f"plans last: {', '.join(last) or order[-1]}")
 
-    t_event = max([g.time for m in members for _, g in st.goals_of[m] if isinstance(g, (TackleGoal, AvoidGoal))],
+    t_event = max([g.time for m in members for _, g in st.goals_of[m] if hasattr(g, "opponents")],
                   default=T)
     reps = {m: spec.solves_per_cycle.get(m, 1) if mode == "coupled" else 1 for m in members}
     sched = tuple(kinds)
@@ -510,8 +499,6 @@ def _check_windows(scn: Scenario, steps: list[Step]) -> None:
     that made it narrow: the nearest style change (its seam window is half the shorter
     neighbouring window on each side), else ``schedule.seam`` / ``schedule.max_window``, else
     the nearest goal time (decreasing-horizon windows end at the latest adversarial time)."""
-    from scenarios.errors import InputError
-
     for s in steps:
         w0, w1 = s.window
         if w1 - w0 >= MIN_WINDOW - EPS:
@@ -539,6 +526,27 @@ def _check_windows(scn: Scenario, steps: list[Step]) -> None:
         timed = [(abs(getattr(g, "time", 1e300) - w0), j) for j, g in enumerate(scn.goals) if hasattr(g, "time")]
         path = ("goals", min(timed)[1], "time") if timed else ("duration",)
         raise InputError(f"a goal time leaves too little time to optimise: {why}", scn.location(path))
+
+
+def _check_hard_couplings(scn: Scenario, steps: list[Step]) -> None:
+    """A hard coupling is solved jointly (scenegraph/joint.py): a hand-hold between two
+    characters.  A hard carry (the holders' hands do not meet) and a joint step of more than
+    two characters have no joint solve: InputError at the coupling or at ``schedule.kind``."""
+    index = {name: i for i, (name, _) in enumerate(scn.named_couplings())}
+    for s in steps:
+        hard = [n.split(":", 1)[1] for n, w in s.terms if n.startswith("coupling:") and w == HARD]
+        for cname in hard:
+            i = index[cname]
+            c = scn.couplings[i]
+            if not isinstance(c, HandHold):
+                raise InputError(f"couplings[{i}] ({cname}): a {c.type} cannot be solved as a hard coupling "
+                                 f"(schedule.kind {scn.schedule.kind!r} solves couplings jointly, and only a "
+                                 "hand_hold between two characters has a joint solve); use schedule.kind auto "
+                                 "or coupled (rubber band)", scn.location(("couplings", i, "type")))
+        if hard and len(s.characters) != 2:
+            raise InputError(f"schedule.kind {scn.schedule.kind!r} would solve {len(s.characters)} characters "
+                             f"({', '.join(s.characters)}) jointly with hard couplings; a joint solve holds two "
+                             "characters; use schedule.kind auto or coupled", scn.location(("schedule", "kind")))
 
 
 def compile_schedule(scn: Scenario) -> Schedule:
@@ -589,6 +597,7 @@ def compile_schedule(scn: Scenario) -> Schedule:
         g.add_node(s.id)
     g.add_edges_from(all_edges)
     _check_windows(scn, all_steps)
+    _check_hard_couplings(scn, all_steps)
     reduced = nx.transitive_reduction(g)
     return Schedule.from_steps(all_steps, sorted(reduced.edges()), scenario=scn.name, groups=tuple(groups),
                                notes=tuple(notes))

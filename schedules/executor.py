@@ -42,16 +42,16 @@ from pathlib import Path
 import numpy as np
 
 from scenarios.errors import ComposeError, InputError, Location
-from scenarios.weights import START_WEIGHT
 from scenegraph.footsteps import Footstep
+from scenegraph.joint import solve_joint
 from scenegraph.motion import Motion
-from scenegraph.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
-from scenegraph.problem import HandleTarget, Subproblem, solve, window_mask
-from scenegraph.style import Style
+from scenegraph.problem import solve
+from scenegraph.scene import Scene
 from scenegraph.synthesis import presolve_kinematics
 
 from .checkpoints import Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
-from .step import COUPLED, FREE, FULL, Schedule, Step
+from .lower import iteration_cap, lower, lower_joint
+from .step import FULL, Schedule, Step
 
 __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
            "run_fingerprint"]
@@ -59,11 +59,7 @@ __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT",
 STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
 FORMAT = 2  # run-folder format (1: pickled checkpoints, no longer read)
-STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
-SOFT_PIN_HZ = 120.0  # soft footprint springs of full steps: planted feet still between collocation points
 WARM_IPOPT = (("mu_strategy", "monotone"), ("mu_init", 1e-4))  # full steps warm-started from full steps
-COUPLING_TARGET_HZ = 60.0  # rubber-band target points per second (at 10 Hz the hands met at the
-# target points and parted by up to 9 cm between them)
 
 
 class StepFailed(ComposeError):
@@ -117,30 +113,6 @@ def run_fingerprint(scenario_text: str, schedule: Schedule) -> str:
     return h.hexdigest()[:20]
 
 
-def _blend(a: Style, b: Style, w: float) -> Style:
-    if w <= 0.0 or a is b:
-        return a
-    if w >= 1.0:
-        return b
-    return Style.from_vector((1 - w) * a.vector() + w * b.vector(), name=f"{a.name}>{b.name}@{w:.2f}")
-
-
-def _style_at(scene: Scene, who: str, step: Step, t: float) -> Style:
-    st = scene.character(who)
-    tl = next((s for s in step.styles if s.character == who), None)
-    if tl is None:
-        return st.style
-    s0, s1, w = tl.at(t)
-    return _blend(st.style_of(s0), st.style_of(s1), w)
-
-
-def _world_window(motion: Motion, duration: float, window: tuple[float, float]) -> tuple[float, float]:
-    """Canonical seconds (world time of the initial uniform warp) → world time of ``motion``."""
-    s = np.clip(np.array(window, float) / duration, 0.0, 1.0)
-    t = motion.time(s)
-    return float(t[0]), float(t[1])
-
-
 def _remap_footsteps(old: Motion, new: Motion, steps: tuple[Footstep, ...]) -> tuple[Footstep, ...]:
     if np.array_equal(np.asarray(old.warp), np.asarray(new.warp)):
         return steps
@@ -161,68 +133,6 @@ def _hard_violations(viol: dict) -> dict:
     return {k: v for k, v in viol.items() if v > VIOLATION_TOL}
 
 
-COUPLED_FULL_MAX_ITER = 100  # a coupled character's full step: one move of the alternation (thesis §6.4.3)
-
-
-def _iteration_cap(step: Step) -> int:
-    if step.kind != FULL:
-        return 100
-    return COUPLED_FULL_MAX_ITER if COUPLED in step.schedules else 300
-
-
-def _gait_change(scene: Scene, who: str) -> bool:
-    return any(g.type == "style_change" and g.character == who and g.data[1] is not None for g in scene.goals)
-
-
-def _subproblem(scene: Scene, step: Step, who: str) -> tuple[Subproblem, np.ndarray | None]:
-    st = scene.character(who)
-    m = st.motion
-    whole = step.window[0] <= 1e-9 and step.window[1] >= scene.duration - 1e-9
-    win = _world_window(m, scene.duration, step.window)
-    free = set()
-    if "q" in step.free:
-        free.add("q")
-    if "timewarp" in step.free and whole and not _gait_change(scene, who):
-        # windowed steps keep the warp (their neighbours hold it); so does a gait change,
-        # whose plan times the walk and the run (a free warp compressed the walk and
-        # stretched the run into one uniform energy-optimal speed)
-        free.add("warp")
-    steps = st.footsteps
-    if "footprints" in step.free:
-        free.add("footprints")
-        # only footsteps entirely inside the window move; the rest are held where they are
-        steps = tuple(f if (whole or (f.t0 >= win[0] - 1e-6 and f.t1 <= win[1] + 1e-6)) else replace(f, free=False)
-                      for f in steps)
-    targets, avoid = goal_targets(scene, who, step.goals, window=win)  # window: tackle/avoid reaction time
-    springs = ()
-    for cname in step.couplings:
-        w = step.term(f"coupling:{cname}")
-        if isinstance(w, (int, float)):
-            targets += coupling_targets(scene, who, cname, float(w), win, rate=COUPLING_TARGET_HZ)
-            springs += coupling_springs(scene, who, cname, float(w), win)
-    if step.term("start") is not None and win[0] <= m.start + 1e-9:
-        x, y, _ = st.start
-        z = float(handle_track(st, "pelvis", [m.start])[0][2])
-        targets += (HandleTarget("pelvis", m.start, (x, y, z), START_WEIGHT, name="start"),)
-    style = _style_at(scene, who, step, step.window[0])
-    style_end = _style_at(scene, who, step, step.window[1])
-    if style_end is style:
-        style_end = None
-    sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
-                    dynamics="full" if step.kind == FULL else "relaxed", targets=targets, avoid=avoid, springs=springs,
-                    style_end=style_end, max_iter=_max_iter(_iteration_cap(step)),
-                    open_end=not whole and step.term("boundary:end") == FREE,
-                    window_only=step.role == "receding",
-                    label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS,
-                    soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
-                    # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
-                    # a dense grid too, as synthesize does for runs — between the 30 Hz points a
-                    # toe dipped 11–15 mm (audit gate 10 mm)
-                    soft_ground_hz=SOFT_PIN_HZ if step.kind == FULL and step.role == "horizon" else 0.0)
-    mask = None if whole else window_mask(sp, m.n_ctrl)
-    return sp, mask
-
-
 def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: dict | None = None) -> dict:
     """Solve one Step against ``scene`` (a snapshot); returns the data a checkpoint stores.
 
@@ -232,6 +142,8 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
     """
     out: dict = {"step": step.id, "characters": {}}
     cur = scene
+    lowered: dict = {}
+    pre_infos: dict = {}
     for who in step.characters:
         pre_info = None
         if who in presolve:
@@ -241,7 +153,11 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
                         "seconds": pre.seconds}
             if pre.success:
                 cur = cur.with_motion(who, pre.motion)
-        sp, mask = _subproblem(cur, step, who)
+        pre_infos[who] = pre_info
+        joint = lower_joint(cur, step)
+        if joint is not None:  # a hard coupling: both characters in one NLP, solved below
+            continue
+        sp, mask = lower(cur, step, who, max_iter=_max_iter(iteration_cap(step)))
         if step.kind == FULL and contacts and contacts.get(who):
             # λ from the forces of the character's last full steps, not a constant share: a
             # decreasing-horizon window started at 100× its final objective and IPOPT left
@@ -252,26 +168,41 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
             # computation"; monotone: converged in 14 iterations)
             sp = replace(sp, contact_guess=contacts[who],
                          ipopt_options=sp.ipopt_options + WARM_IPOPT)
-        res = solve(sp)
-        old = cur.character(who)
-        motion = res.motion
-        if mask is not None:  # write back only the window's control points
-            ctrl = np.array(old.motion.ctrl, float)
-            ctrl[mask] = np.asarray(res.motion.ctrl)[mask]
-            motion = Motion(ctrl, np.asarray(res.motion.warp, float))
-        free_flags = [f.free for f in old.footsteps]
-        steps = tuple(replace(f, free=fl) for f, fl in zip(res.footsteps, free_flags))
-        steps = _remap_footsteps(old.motion, motion, steps)
-        cur = cur.with_motion(who, motion, steps)
-        out["characters"][who] = {
-            "ctrl": np.asarray(motion.ctrl, float), "warp": np.asarray(motion.warp, float), "footsteps": steps,
-            "mask": mask, "status": res.status, "success": bool(res.success), "iterations": res.iterations,
-            "seconds": res.seconds + (pre_info["seconds"] if pre_info else 0.0), "energy": res.energy,
-            "violations": {k: float(v) for k, v in res.violations.items()}, "presolve": pre_info,
-            "contact_forces": res.contact_forces, "window": sp.window,
-            "timing": res.timing.as_dict() if res.timing is not None else {},
-        }
+        cur = _write_back(cur, who, sp, mask, solve(sp), pre_info, out)
+    joint = lower_joint(cur, step)
+    if joint is not None:
+        (a, b), sps = joint.characters, {}
+        for who in joint.characters:
+            sps[who] = lower(cur, step, who, max_iter=_max_iter(iteration_cap(step)))
+        jr = solve_joint(sps[a][0], sps[b][0], joint.coupling)
+        for who, res in zip((a, b), jr.results):
+            res = replace(res, violations={**res.violations, f"coupling:{joint.coupling.name}":
+                                           float(jr.violations.get("coupling", 0.0))})
+            cur = _write_back(cur, who, sps[who][0], sps[who][1], res, pre_infos.get(who), out)
     return out
+
+
+def _write_back(cur: Scene, who: str, sp, mask, res, pre_info, out: dict) -> Scene:
+    """Merge one character's Result into ``cur`` (only the window's control points) and record
+    the checkpoint data of it in ``out``."""
+    old = cur.character(who)
+    motion = res.motion
+    if mask is not None:  # write back only the window's control points
+        ctrl = np.array(old.motion.ctrl, float)
+        ctrl[mask] = np.asarray(res.motion.ctrl)[mask]
+        motion = Motion(ctrl, np.asarray(res.motion.warp, float))
+    free_flags = [f.free for f in old.footsteps]
+    steps = tuple(replace(f, free=fl) for f, fl in zip(res.footsteps, free_flags))
+    steps = _remap_footsteps(old.motion, motion, steps)
+    out["characters"][who] = {
+        "ctrl": np.asarray(motion.ctrl, float), "warp": np.asarray(motion.warp, float), "footsteps": steps,
+        "mask": mask, "status": res.status, "success": bool(res.success), "iterations": res.iterations,
+        "seconds": res.seconds + (pre_info["seconds"] if pre_info else 0.0), "energy": res.energy,
+        "violations": {k: float(v) for k, v in res.violations.items()}, "presolve": pre_info,
+        "contact_forces": res.contact_forces, "window": sp.window,
+        "timing": res.timing.as_dict() if res.timing is not None else {},
+    }
+    return cur.with_motion(who, motion, steps)
 
 
 def presolve_character(scene: Scene, who: str) -> dict:

@@ -31,7 +31,8 @@ from scenarios.errors import ComposeError, InputError
 
 __all__ = ["Step", "StyleTimeline", "Group", "Schedule", "Weight",
            "TIMEWARP", "TIME_LAYERED", "COUPLED", "DECREASING_HORIZON", "JOINT", "KINDS",
-           "TIMING", "FULL", "HARD", "RELAXED", "FREE"]
+           "TIMING", "FULL", "HARD", "RELAXED", "FREE", "STEP_KINDS", "FREE_BLOCKS", "TERMS", "TERM_PREFIXES",
+           "ROLES", "vocabulary", "declared_vocabulary"]
 
 # schedule kinds (thesis §6.4); JOINT: the characters of a group are solved together in one Step
 TIMEWARP = "timewarp"
@@ -50,6 +51,45 @@ RELAXED = "relaxed"
 FREE = "free"  # boundary:end of a receding window: the end state is free (the next window moves on from it)
 
 Weight = float | str  # a number (a penalty weight or a spring stiffness) or HARD / RELAXED / FREE
+
+# --- the vocabulary of a Step: everything the compiler may write and the executor must honour ---
+# (schedules/lower.py lists what it handles; tests/test_contract.py checks that what the compiler
+# emits is a subset of this vocabulary and that the lowering handles every item of it)
+STEP_KINDS = (TIMING, FULL)
+FREE_BLOCKS = ("q", "timewarp", "duration", "footprints", "lambda", "coupling_forces")
+NUMBER = "number"  # a term whose value is a float
+TERMS: dict[str, tuple[str, ...]] = {  # exact term names -> the values they may take
+    "energy": (NUMBER,),
+    "dynamics": (HARD, RELAXED),
+    "environment": (HARD,),
+    "start": (NUMBER,),
+    "boundary:start": (HARD,),
+    "boundary:end": (HARD, FREE),
+}
+TERM_PREFIXES: dict[str, tuple[str, ...]] = {  # "goal:<name>", "coupling:<name>" -> values
+    "goal": (NUMBER, HARD),
+    "coupling": (NUMBER, HARD),
+}
+ROLES = ("whole", "window", "seam", "horizon", "receding")
+
+
+def vocabulary(step: "Step") -> set[tuple[str, str]]:
+    """The Step's vocabulary items: ("kind", k), ("free", block), ("role", r), and
+    ("term", "<name or prefix>=<value class>") with value class ``number`` for floats."""
+    out = {("kind", step.kind), ("role", step.role)}
+    out |= {("free", b) for b in step.free}
+    for name, w in step.terms:
+        key = name.split(":", 1)[0] if name.split(":", 1)[0] in TERM_PREFIXES else name
+        out.add(("term", f"{key}={NUMBER if isinstance(w, (int, float)) else w}"))
+    return out
+
+
+def declared_vocabulary() -> set[tuple[str, str]]:
+    """Every item a Step may hold (see :func:`vocabulary`)."""
+    out = {("kind", k) for k in STEP_KINDS} | {("role", r) for r in ROLES} | {("free", b) for b in FREE_BLOCKS}
+    for table in (TERMS, TERM_PREFIXES):
+        out |= {("term", f"{n}={v}") for n, vs in table.items() for v in vs}
+    return out
 
 
 @dataclass(frozen=True)
@@ -92,19 +132,23 @@ class Step:
     kind        ``timing`` (timewarp + placements, dynamics relaxed) or ``full`` (dynamics hard)
     characters  whose variables are free (one, or a whole group when solved jointly)
     window      (t0, t1) canonical seconds: only coefficients whose support lies inside are free
-    free        free variable blocks: ``q`` (DOF spline coefficients), ``timewarp``,
-                ``footprints`` (free constraint locations), ``lambda`` (contact force
-                coefficients), ``coupling_forces`` (forces of hard couplings), ``duration``
-                (with ``timing: free``: the end of this character's timewarp, within
-                ``duration_bounds``; only in steps whose window reaches the end)
+    free        free variable blocks (FREE_BLOCKS): ``q`` (DOF spline coefficients), ``timewarp``
+                (only in steps over the whole scene, and never for a character with a gait
+                change, whose footstep plan times the walk and the run), ``footprints`` (free
+                constraint locations), ``lambda`` (contact force coefficients; every step),
+                ``coupling_forces`` (the hand forces of hard couplings: the characters are
+                solved jointly, scenegraph/joint.py), ``duration`` (with ``timing: free``: the
+                end of the timewarp moves within ``duration_bounds``; only with ``timewarp``)
     terms       (name, weight) pairs; names: ``energy`` (weight), ``dynamics`` (hard|relaxed),
                 ``environment`` (ground, friction cone, no penetration, feet not crossing),
                 ``start`` (a soft spring of this weight holding the start position),
                 ``boundary:start`` / ``boundary:end`` (``hard``: pose and velocity at the window's
                 end held at the current Scene; ``boundary:end=free``: a receding window's end
-                state is free, its dynamics count up to the window's end), ``goal:<name>`` (``hard`` for footprints, else the
-                weight of its soft springs: walk_to, reach, tackle, avoid),
-                ``coupling:<name>`` (a stiffness in N/m = rubber-band continuation, or ``hard``)
+                state is free, its dynamics count up to the window's end), ``goal:<name>``
+                (``hard`` for footprints, else the weight of its soft springs: walk_to, reach,
+                tackle, avoid; the executor uses exactly this weight), ``coupling:<name>`` (a
+                stiffness in N/m = rubber-band continuation, or ``hard``: a joint solve, full
+                steps only)
     cycle       1-based schedule cycle
     schedules   the schedule kinds that produced it, outermost first, e.g. (coupled, timewarp)
     role        ``whole`` | ``window`` | ``seam`` | ``horizon`` | ``receding``

@@ -15,7 +15,9 @@ rules:
 6. learning (``scenegraph/nio/``) sits on top of the model: no other ``scenegraph`` module
    imports it, and inside it each module imports only those before it in ``NIO_ORDER``;
 7. the file and version helpers ``scenarios/atomic.py`` and ``scenarios/versions.py`` import
-   nothing of the project but ``scenarios.errors``, so every layer can use them.
+   nothing of the project but ``scenarios.errors``, so every layer can use them;
+8. goal and coupling records (``scenegraph/goals``) and the measures they use
+   (``scenegraph/measure.py``) never import the Scene (``scenegraph.scene`` builds them).
 """
 from __future__ import annotations
 
@@ -180,6 +182,12 @@ def test_model_never_imports_the_plan():
 def test_audit_and_residual_never_see_the_transcription():
     bad = [f"{m} -> {t}" for m in ("scenegraph.audit", "scenegraph.residual")
            for t in sorted(_imports(m)[0]) if t == "scenegraph.problem" or t.startswith("scenegraph.problem.")]
+    assert bad == []
+
+
+def test_goal_records_never_import_the_scene():
+    bad = [f"{m} -> {t}" for m in _modules() if m == "scenegraph.measure" or m.startswith("scenegraph.goals")
+           for t in sorted(_imports(m)[0]) if t == "scenegraph.scene"]
     assert bad == []
 
 

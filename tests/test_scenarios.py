@@ -115,7 +115,9 @@ def test_minimal_scenario_defaults():
     assert c.style == "default" and c.start.position == (0.0, 0.0) and c.start.heading == 0.0
     assert c.body.shoe_stiffness_scale == 1.0 and not c.body.extra_masses
     assert scn.timing == "fixed" and scn.goals == [] and scn.couplings == [] and scn.schedule is None
-    assert scn.environment.ground.friction == 1.0 and scn.environment.slopes == []
+    # the default μ is the model's (scenegraph.dynamics.MU, what the solver always used on flat ground)
+    from scenegraph.dynamics import MU
+    assert scn.environment.ground.friction == MU and scn.environment.slopes == []
     assert scn.style_file("default") is None
 
 

@@ -19,7 +19,8 @@ import pytest
 
 from scenarios import load_scenario, parse_scenario
 from scenegraph.motion import Motion
-from scenegraph.scene import (TACKLE_CONTACT_TOL, GoalSpec, adversarial_plans_last, avoid_measure, body_frames,
+from scenegraph.goals import Avoid, Tackle
+from scenegraph.scene import (TACKLE_CONTACT_TOL, adversarial_plans_last, avoid_measure, body_frames,
                               build_scene, chest_front, goal_targets, reach_budget, tackle_measure, torso_distance)
 from schedules.cli_run import avoid_entry, goal_verdict, tackle_entry
 
@@ -125,12 +126,13 @@ def test_plans_last_per_pair():
 # --- report entries and verdict ---------------------------------------------------------------------
 
 def _tackle_goal(plans_last="tackler", speed=3.0, min_speed=2.0):
-    return GoalSpec("hit", "tackle", "tackler", "dodger", 1.0, TACKLE_CONTACT_TOL, (min_speed, True, speed),
-                    plans_last=plans_last)
+    return Tackle(name="hit", character="tackler", partner="dodger", time=1.0, tolerance=TACKLE_CONTACT_TOL,
+                  min_speed=min_speed, hands_around_torso=True, speed=speed, plans_last=plans_last)
 
 
 def _avoid_goal(plans_last="tackler"):
-    return GoalSpec("dodge", "avoid", "dodger", "tackler", 1.0, 1e-3, (0.5,), plans_last=plans_last)
+    return Avoid(name="dodge", character="dodger", partner="tackler", time=1.0, tolerance=1e-3, radius=0.5,
+                 plans_last=plans_last)
 
 
 def _m(d, v):

@@ -114,7 +114,8 @@ class Subproblem:
     open_end: bool = False  # a receding window: the control points whose support begins inside the
     # window are free (the end state too), and the dynamics count only up to the window's end
     fix_start_time: bool = True
-    fix_end_time: bool = True
+    fix_end_time: bool = True  # False (free duration): the end of the timewarp moves within end_time_bounds
+    end_time_bounds: tuple[float, float] | None = None  # world s; with fix_end_time False and a free warp
     cyclic: bool = False
     contact_guess: dict | None = field(default=None, compare=False, hash=False)  # warm start for λ
     min_foot_separation: float = 0.06

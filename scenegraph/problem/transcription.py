@@ -83,8 +83,9 @@ class NLP:
     anchor_slices: tuple[slice, ...]  # slice into p of each spring's anchor (3 × N at s_points, column-major)
     f_fn: ca.Function  # x, p -> objective (IPOPT's f)
     g_fn: ca.Function  # x, p -> constraints
-    hess_lag: ca.Function  # x, p, lam_f, lam_g -> upper triangle of the Lagrangian Hessian given to IPOPT
-    jac_g: ca.Function  # x, p -> (g, ∂g/∂x) given to IPOPT (SX)
+    hess_lag: ca.Function | None  # x, p, lam_f, lam_g -> upper triangle of the Lagrangian Hessian given to
+    # IPOPT (None: transcribed with derivatives=False)
+    jac_g: ca.Function | None  # x, p -> (g, ∂g/∂x) given to IPOPT (SX; None without derivatives)
     unpack: ca.Function  # x, p -> ctrl, warp, foot xy, energy terms, spring forces
     groups: list  # (name, slice into g, kind)
     s_points: np.ndarray  # collocation points (canonical time s)
@@ -233,8 +234,13 @@ def _drop_cyclic_duplicates(pins: list) -> list:
 
 
 
-def transcribe(sp: Subproblem) -> NLP:
-    """The NLP of ``sp`` (see the module docstring); the solver is created by ``solver.make_solver``."""
+def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
+    """The NLP of ``sp`` (see the module docstring); the solver is created by ``solver.make_solver``.
+
+    ``derivatives=False`` skips the Lagrangian Hessian and the constraint Jacobian (``hess_lag``
+    and ``jac_g`` are then None; about 70 % of the build time): the variables, objective,
+    constraints, bounds and layout are the same, which is what a smoke test of the lowering
+    needs (tests/test_bundled_build.py); such an NLP cannot be handed to IPOPT."""
     ch, m = sp.character, sp.motion
     K, nW = m.n_ctrl, len(m.warp)
     mg = ch.total_mass * G
@@ -470,6 +476,8 @@ def transcribe(sp: Subproblem) -> NLP:
             add("start_time", xW[0] - m.start, 0.0, 0.0)
         if sp.fix_end_time:
             add("end_time", xW[-1] - m.end, 0.0, 0.0)
+        elif sp.end_time_bounds is not None:  # a free duration (timing: free)
+            add("end_time", xW[-1], float(sp.end_time_bounds[0]), float(sp.end_time_bounds[1]), "ineq")
 
     # variable bounds: joint limits on control points, λ ≥ 0, footprints within 0.5 m
     lo, hi = ch.lower, ch.upper
@@ -491,49 +499,51 @@ def transcribe(sp: Subproblem) -> NLP:
     gg = ca.vertcat(*g)
 
     # Gauss–Newton Hessian of the objective + exact Hessian of the (kinematic) constraints
-    lam_f = ca.MX.sym("lam_f")
-    lam_g = ca.MX.sym("lam_g", gg.shape[0])
-    # Everything but the dynamics kernel is plain SX-expandable algebra: expanding those
-    # parts makes their derivatives cheap scalar code instead of MX graph evaluation.
-    # (expand the plain functions first, then differentiate in SX: much cheaper to build)
-    rho_x = ca.vertcat(*[OBJ_SCALE * ca.vec(r) for r in rho_extra])
-    xs, ps = ca.SX.sym("x", x.shape[0]), ca.SX.sym("p", p.shape[0])
-    J_dyn = ca.jacobian(rho_dyn, x)
-    rxs = ca.Function("rho_extra", [x, p], [rho_x]).expand()(xs, ps)
-    J_x = ca.Function("J_extra", [xs, ps], [ca.jacobian(rxs, xs)])(x, p)
-    gs = ca.Function("g_all", [x, p], [gg]).expand()(xs, ps)
-    if gg.shape[0]:
-        lam_s = ca.SX.sym("lam_s", gg.shape[0])
-        Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s, gs), xs)[0]])(x, p, lam_g)
-    else:
-        Hc = ca.MX(x.shape[0], x.shape[0])
-    H = 2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x))
-    if sp.hessian != "gauss_newton_objective":
-        H = H + Hc
     if sp.hessian not in HESSIAN_MODES:
         raise ValueError(f"Subproblem.hessian must be one of {HESSIAN_MODES}, not {sp.hessian!r}")
-    if sp.hessian == "exact":
-        # second-order term 2 Σ r ∇²r of Σ r² (times lam_f).  Dynamics: r = C ⊙ Q(z) per point with
-        # z = (q, q̇, q̈, forces); with the timewarp held, C is constant and z linear in x, so the
-        # term is exactly J_zᵀ blockdiag(∇²_z (w·Q)) J_z with w = 2 lam_f r ⊙ C (compiled kernel
-        # Hessian).  A free timewarp (and a spring's force, nonlinear in q) also curves z and C:
-        # those curvature terms are left out (Gauss–Newton in them).
-        if sp.dynamics != "kinematic":
-            C = scale * ca.vertcat(SA, np.sqrt(w_r) * ca.DM.ones(N_ROOT, N)) * ca.repmat(wt, N_DOF, 1)
-            Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, N) * C
-            nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
-            Hk = kernel_hessian(ch).map(N)(Q, Qd, Qdd, Fc, TH, Wk)  # (nz, nz N)
-            Hzz = ca.diagcat(*ca.horzsplit(Hk, nz)) if N > 1 else Hk
-            Jz = ca.jacobian(ca.vec(ca.vertcat(Q, Qd, Qdd, Fc)), x)
-            H = H + ca.mtimes(Jz.T, ca.mtimes(Hzz, Jz))
-        if rho_x.shape[0]:  # the other least-squares terms are plain SX algebra: exact Hessian directly
-            mu = ca.SX.sym("mu", rho_x.shape[0])
-            H = H + ca.Function("H_extra", [xs, ps, mu], [ca.hessian(ca.dot(mu, rxs), xs)[0]])(
-                x, p, 2 * lam_f * rho_x)
-    H = ca.triu(H)
-    hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+    rho_x = ca.vertcat(*[OBJ_SCALE * ca.vec(r) for r in rho_extra])
+    hess = jac_g = None
+    if derivatives:
+        lam_f = ca.MX.sym("lam_f")
+        lam_g = ca.MX.sym("lam_g", gg.shape[0])
+        # Everything but the dynamics kernel is plain SX-expandable algebra: expanding those
+        # parts makes their derivatives cheap scalar code instead of MX graph evaluation.
+        # (expand the plain functions first, then differentiate in SX: much cheaper to build)
+        xs, ps = ca.SX.sym("x", x.shape[0]), ca.SX.sym("p", p.shape[0])
+        J_dyn = ca.jacobian(rho_dyn, x)
+        rxs = ca.Function("rho_extra", [x, p], [rho_x]).expand()(xs, ps)
+        J_x = ca.Function("J_extra", [xs, ps], [ca.jacobian(rxs, xs)])(x, p)
+        gs = ca.Function("g_all", [x, p], [gg]).expand()(xs, ps)
+        if gg.shape[0]:
+            lam_s = ca.SX.sym("lam_s", gg.shape[0])
+            Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s, gs), xs)[0]])(x, p, lam_g)
+        else:
+            Hc = ca.MX(x.shape[0], x.shape[0])
+        H = 2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x))
+        if sp.hessian != "gauss_newton_objective":
+            H = H + Hc
+        if sp.hessian == "exact":
+            # second-order term 2 Σ r ∇²r of Σ r² (times lam_f).  Dynamics: r = C ⊙ Q(z) per point with
+            # z = (q, q̇, q̈, forces); with the timewarp held, C is constant and z linear in x, so the
+            # term is exactly J_zᵀ blockdiag(∇²_z (w·Q)) J_z with w = 2 lam_f r ⊙ C (compiled kernel
+            # Hessian).  A free timewarp (and a spring's force, nonlinear in q) also curves z and C:
+            # those curvature terms are left out (Gauss–Newton in them).
+            if sp.dynamics != "kinematic":
+                C = scale * ca.vertcat(SA, np.sqrt(w_r) * ca.DM.ones(N_ROOT, N)) * ca.repmat(wt, N_DOF, 1)
+                Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, N) * C
+                nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
+                Hk = kernel_hessian(ch).map(N)(Q, Qd, Qdd, Fc, TH, Wk)  # (nz, nz N)
+                Hzz = ca.diagcat(*ca.horzsplit(Hk, nz)) if N > 1 else Hk
+                Jz = ca.jacobian(ca.vec(ca.vertcat(Q, Qd, Qdd, Fc)), x)
+                H = H + ca.mtimes(Jz.T, ca.mtimes(Hzz, Jz))
+            if rho_x.shape[0]:  # the other least-squares terms are plain SX algebra: exact Hessian directly
+                mu = ca.SX.sym("mu", rho_x.shape[0])
+                H = H + ca.Function("H_extra", [xs, ps, mu], [ca.hessian(ca.dot(mu, rxs), xs)[0]])(
+                    x, p, 2 * lam_f * rho_x)
+        H = ca.triu(H)
+        hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
-    jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
+        jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
     th = theta_kernel_vector(sp.style)
     sa = np.sqrt(np.asarray(sp.style.alpha, float))
     if sp.style_end is not None:

@@ -1,17 +1,27 @@
-"""Measured effects of a gait transition (thesis §6.4.2), for the run report.
+"""``style_change``: switch a character's style at a time (θ blended across the transition),
+optionally with a gait change of its generated footsteps (walk → run).
 
-A walk → run transition succeeds when the character reaches the new gait's speed; the
-thesis also describes *how* it gets there: the body dips and leans forward before it
-reaches running speed.  All quantities come from the synthesized motion (world frame,
-z up, metres, seconds, degrees).
+Plan: the compiler's style timeline (``schedules.step.StyleTimeline``).  Scene: with a gait,
+the footsteps change cadence, stance and step length over the blend (``build_scene``), and
+the timewarp is held (the plan times the walk and the run).  Measure (thesis §6.4.2, with a
+gait): the speed reached over the last stride (at least SPEED_FRACTION of the new gait's
+cadence × step length), the forward lean and the pelvis dip of the transition
+(:func:`transition_measures`; world frame, z up, m, s, degrees).  Without a gait: the style
+timeline was applied (always holds).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from scenegraph.scene import GAITS, CharacterState, handle_track
+from ..footsteps import GAITS
+from ..measure import handle_track
+from .base import GoalRecord, where_of
 
-__all__ = ["transition_measures", "transition_entry", "SPEED_FRACTION"]
+__all__ = ["StyleChange", "transition_measures", "SPEED_FRACTION", "DEFAULT_BLEND"]
+
+DEFAULT_BLEND = 0.6  # s: blend of a gait change's footsteps without ``blend``
 
 SPEED_FRACTION = 0.9  # the transition holds when the final stride's speed ≥ this × the gait's speed
 HZ = 60.0
@@ -24,7 +34,7 @@ def _lean_deg(pelvis: np.ndarray, chest: np.ndarray, heading: np.ndarray) -> np.
     return np.degrees(np.arctan2(fwd, d[:, 2]))
 
 
-def transition_measures(state: CharacterState, t_change: float, blend: float, gait: str,
+def transition_measures(state, t_change: float, blend: float, gait: str,
                         t_end: float) -> dict:
     """Speed reached, lean and dip of a gait change at ``t_change`` (s) blended over ``blend`` s.
 
@@ -71,11 +81,29 @@ def transition_measures(state: CharacterState, t_change: float, blend: float, ga
     }
 
 
-def transition_entry(goal, state: CharacterState, duration: float) -> dict:
-    """Report entry of a style change with a gait (``goal.data`` = (style, gait, blend))."""
-    _, gait, blend = goal.data[:3]
-    m = transition_measures(state, goal.time, float(blend or 0.6), gait, duration)
-    return {"type": goal.type, "what": f"mean pelvis speed over the last {gait} stride vs the {gait}'s speed "
-            "(cadence × step length); lean and dip of the transition",
-            "measured": m["speed"], "tolerance": SPEED_FRACTION * m["target_speed"], "unit": "m/s (must be >=)",
-            **{k: v for k, v in m.items() if k not in ("speed", "holds")}, "holds": m["holds"]}
+@dataclass(frozen=True, kw_only=True)
+class StyleChange(GoalRecord):
+    """style: the new style reference; gait: "walk" | "run" | None; blend: s or None."""
+
+    kind = "style_change"
+    style: str
+    gait: str | None = None
+    blend: float | None = None
+
+    @classmethod
+    def from_schema(cls, name: str, g, scn, j: int, plans_last=None) -> "StyleChange":
+        return cls(name=name, character=g.character, time=float(g.time), tolerance=0.0,
+                   where=where_of(scn, ("goals", j), name), style=g.style, gait=g.gait,
+                   blend=None if g.blend is None else float(g.blend))
+
+    def entry(self, scene, audits) -> dict:
+        if self.gait is None:
+            return {"type": self.kind, "what": "style timeline applied (θ blended across the seam)",
+                    "measured": None, "tolerance": None, "holds": True, "where": self.where}
+        m = transition_measures(scene.character(self.character), self.time, float(self.blend or DEFAULT_BLEND),
+                                self.gait, scene.duration)
+        return {"type": self.kind, "what": f"mean pelvis speed over the last {self.gait} stride vs the "
+                f"{self.gait}'s speed (cadence × step length); lean and dip of the transition",
+                "measured": m["speed"], "tolerance": SPEED_FRACTION * m["target_speed"], "unit": "m/s (must be >=)",
+                **{k: v for k, v in m.items() if k not in ("speed", "holds")}, "holds": m["holds"],
+                "where": self.where}
