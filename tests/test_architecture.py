@@ -9,7 +9,10 @@ rules:
 3. ``scenegraph`` (the model, the world and the solver) never imports ``schedules``;
 4. the physics audit and the residual kernels never see the transcription:
    ``scenegraph/audit.py`` and ``scenegraph/residual.py`` never import ``scenegraph.problem``;
-5. the plan is data: ``schedules/compiler.py`` and ``schedules/step.py`` import no CasADi,
+5. the stage auditor (``scenegraph/stage_audit/``) reads the stage only: it imports no
+   other ``scenegraph`` module (not the transcription, the residual kernels, the dynamics
+   or the body model) and no CasADi — it is the independent check of them;
+6. the plan is data: ``schedules/compiler.py`` and ``schedules/step.py`` import no CasADi,
    directly or through anything they import at module level (package ``__init__`` files
    included, as Python runs them); and ``compose schedule`` really does not load it.
 """
@@ -176,6 +179,15 @@ def test_model_never_imports_the_plan():
 def test_audit_and_residual_never_see_the_transcription():
     bad = [f"{m} -> {t}" for m in ("scenegraph.audit", "scenegraph.residual")
            for t in sorted(_imports(m)[0]) if t == "scenegraph.problem" or t.startswith("scenegraph.problem.")]
+    assert bad == []
+
+
+def test_stage_auditor_reads_the_stage_only():
+    mods = [m for m in _modules() if m == "scenegraph.stage_audit" or m.startswith("scenegraph.stage_audit.")]
+    assert "scenegraph.stage_audit.reader" in mods
+    bad = [f"{m} -> {t}" for m in mods for t in sorted(_imports(m)[0])
+           if (t.startswith("scenegraph") and not t.startswith("scenegraph.stage_audit")) or t == "casadi"
+           or t.startswith("schedules")]
     assert bad == []
 
 
