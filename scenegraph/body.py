@@ -108,6 +108,9 @@ class Character:
     bodies: tuple[Body, ...]
     handles: tuple[Handle, ...]
     joint_parent: tuple[tuple[str, str | None], ...] = field(default=())
+    # Point masses added with with_extra_mass (handle, kg), in order: the stage draws them as
+    # carried objects and the bodies as they were before (not part of the fingerprint).
+    loads: tuple[tuple[str, float], ...] = field(default=())
 
     @property
     def dof_names(self) -> list[str]:
@@ -158,7 +161,7 @@ class Character:
                 c = tuple((np.array(b.center) * b.mass + np.array(h.point) * mass) / m)
                 b = replace(b, mass=m, center=c)  # inertia stays the ellipsoid's (point mass adds ~ m d², ignored)
             bodies.append(b)
-        return replace(self, bodies=tuple(bodies))
+        return replace(self, bodies=tuple(bodies), loads=self.loads + ((handle, float(mass)),))
 
     def with_limits(self, name: str, lower: float, upper: float) -> "Character":
         i = self.dof_index(name)
@@ -341,6 +344,89 @@ def make_character(preset: str = "adult_male", height: float | None = None, mass
     return Character(preset, H, M, tuple(dofs), tuple(bodies), tuple(handles))
 
 
+# --- what is drawn ------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class DrawnShape:
+    """The visible solid of one body, in the body's frame (m).
+
+    ``kind`` "ellipsoid": centre ``center``, semi-axes ``semi_axes``.  ``kind`` "dome": the
+    upper half of an ellipsoid cut at its equator, a flat sole; ``center`` is the centre of
+    the sole (its lowest plane), ``semi_axes`` = (half length along x, half width along y,
+    height).  ``mass`` (kg) is the body's own (loads removed) and ``com`` its centre."""
+
+    body: str
+    kind: str
+    center: tuple[float, float, float]
+    semi_axes: tuple[float, float, float]
+    mass: float
+    com: tuple[float, float, float]
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(centre, half extents) of the solid's axis-aligned box in the body frame (m)."""
+        c, s = np.array(self.center, float), np.array(self.semi_axes, float)
+        if self.kind == "dome":
+            return c + [0.0, 0.0, s[2] / 2], np.array([s[0], s[1], s[2] / 2])
+        return c, s
+
+    @property
+    def volume(self) -> float:
+        a, b, c = self.semi_axes
+        return (4.0 if self.kind == "ellipsoid" else 2.0) / 3.0 * math.pi * a * b * c
+
+    @property
+    def inertia(self) -> np.ndarray:
+        """3×3 inertia (kg·m²) of the drawn solid at uniform density about its centre of mass."""
+        a, b, c = self.semi_axes
+        m = self.mass
+        if self.kind == "ellipsoid":
+            return m / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+        d = 3.0 * c / 8.0  # half-ellipsoid: centre of mass 3c/8 above the sole
+        return np.diag([m / 5.0 * (b * b + c * c) - m * d * d, m / 5.0 * (a * a + c * c) - m * d * d,
+                        m / 5.0 * (a * a + b * b)])
+
+
+def _own_mass_and_center(ch: Character, b: Body) -> tuple[float, np.ndarray]:
+    """A body's mass and centre before with_extra_mass added its loads."""
+    m, mc = b.mass, np.array(b.center, float) * b.mass
+    for handle, extra in ch.loads:
+        h = ch.handle(handle)
+        if h.body == b.name:
+            m -= extra
+            mc -= np.array(h.point, float) * extra
+    return m, mc / m
+
+
+def drawn_shapes(ch: Character) -> tuple[DrawnShape, ...]:
+    """The solid drawn for each body (in ``ch.bodies`` order): the dynamics' ellipsoid, except
+    that each foot and each toes segment is a dome whose flat sole holds its contact handles
+    (heel and ball on the foot's sole rim, the toe tip on the toes' rim), so that the visible
+    feet rest on the floor exactly when the handles do.  A dome keeps the body's mass (at the
+    model's density, 1000 kg/m³) and centre of mass; its inertia is the dome's, not the
+    ellipsoid's the dynamics use (docs/usd-output.md gives the difference)."""
+    out = []
+    for b in ch.bodies:
+        m, c = _own_mass_and_center(ch, b)
+        kind, center, semi = "ellipsoid", tuple(float(x) for x in c), b.semi_axes
+        side = b.name.rsplit("_", 1)[-1]
+        rims = None
+        if b.name.startswith("foot_"):
+            rims = (ch.handle(f"heel_{side}").point, ch.handle(f"ball_{side}").point)
+        elif b.name.startswith("toes_"):
+            tip = ch.handle(f"toe_{side}").point
+            rims = ((0.0, 0.0, tip[2]), tip)
+        if rims is not None:
+            (x0, _, z0), (x1, _, _) = rims
+            a = (x1 - x0) / 2.0
+            h = 8.0 / 3.0 * (c[2] - z0)  # the dome's centre of mass lies 3h/8 above its sole
+            if a > 0 and h > 0 and abs(c[0] - (x0 + x1) / 2.0) < 1e-9 and abs(c[1]) < 1e-9:
+                w = m / (DENSITY * 2.0 / 3.0 * math.pi * a * h)
+                kind, center, semi = "dome", ((x0 + x1) / 2.0, 0.0, float(z0)), (float(a), float(w), float(h))
+        out.append(DrawnShape(b.name, kind, center, tuple(float(x) for x in semi), float(m),
+                              tuple(float(x) for x in c)))
+    return tuple(out)
+
+
 def standing_pose(ch: Character) -> np.ndarray:
     """q of the character standing at the origin with soles on the ground (m, rad)."""
     q = np.zeros(N_DOF)
@@ -369,4 +455,4 @@ DOF_NAMES: tuple[str, ...] = (("root_tx", "root_ty", "root_tz", "root_yaw", "roo
                               + tuple(f"{d}_{side}" for side in ("l", "r") for d in _SIDE_DOFS))
 JOINT_DOF_NAMES: tuple[str, ...] = DOF_NAMES[N_ROOT:]
 assert len(DOF_NAMES) == N_DOF, len(DOF_NAMES)
-__all__ += ["standing_pose", "default_character"]
+__all__ += ["standing_pose", "default_character", "DrawnShape", "drawn_shapes"]

@@ -119,6 +119,24 @@ def have_ffmpeg() -> bool:
 
 # --- building scenes ----------------------------------------------------------------------------
 
+def _drawn_ellipsoids(ch, pos: dict) -> list:
+    """(joint, centre, semi-axes) of the box around each solid the stage draws (body frame, m):
+    what :func:`scene_from_stage` reads back from the meshes (domes for feet and toes,
+    carried loads as boxes on their handles)."""
+    from .body import drawn_shapes
+    from .usd_export import CARRIED_DENSITY
+    out = []
+    for bi, d in enumerate(drawn_shapes(ch)):
+        out.append((pos[bi], *d.bounds()))
+    index = {b.name: i for i, b in enumerate(ch.bodies)}
+    for handle, extra in ch.loads:
+        h = ch.handle(handle)
+        shape = np.array([0.4, 1.33, 1.0])
+        half = 0.5 * shape * (max(extra, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
+        out.append((pos[index[h.body]], np.array(h.point, float), half))
+    return out
+
+
 def scene_from_tracks(tracks, fps: float, markers=()) -> PreviewScene:
     """A preview scene from :class:`~scenegraph.usd_export.CharacterTrack` s (uses our FK)."""
     from .kinematics import numeric_fk
@@ -137,7 +155,7 @@ def scene_from_tracks(tracks, fps: float, markers=()) -> PreviewScene:
         W[..., :3, :3], W[..., :3, 3], W[..., 3, 3] = R, p, 1.0
         W = W[:, order]
         pos = {bi: j for j, bi in enumerate(order)}
-        ells = [(pos[bi], np.array(b.center, float), np.array(b.semi_axes, float)) for bi, b in enumerate(tr.character.bodies)]
+        ells = _drawn_ellipsoids(tr.character, pos)
         color = tuple(tr.color) if tr.color is not None else _CHARACTER_COLORS[n % len(_CHARACTER_COLORS)]
         chars.append(PreviewCharacter(tr.name, color, W, ells, [p.rsplit("/", 1)[-1] for p in paths]))
     mk = [PreviewMarker(m.kind, np.asarray(m.position, float), float(m.radius),

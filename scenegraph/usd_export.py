@@ -55,7 +55,7 @@ import numpy as np
 
 from scenarios.errors import ComposeError, InputError
 
-from .body import N_DOF, Character, standing_pose
+from .body import N_DOF, Character, drawn_shapes, standing_pose
 from .kinematics import numeric_fk
 
 __all__ = [
@@ -284,6 +284,58 @@ def ellipsoid_mesh(center, semi_axes, n_around: int = 16, n_rings: int = 10):
     return pts, nrm, counts, idx
 
 
+def dome_mesh(sole_center, semi_axes, n_around: int = 16, n_rings: int = 10):
+    """The upper half of an ellipsoid over a flat sole: points (N,3), normals (N,3), counts,
+    indices.  ``sole_center`` is the sole's centre, ``semi_axes`` (a, b, height).  The rim
+    (the sole's outline) has ``n_around`` points, the first at +x and, for even counts, one
+    at −x (where a foot's ball and heel handles sit); the sole is a fan around its centre.
+    Normals: the ellipsoid's on the dome, −z on the sole (rim points use the dome's)."""
+    c = np.asarray(sole_center, dtype=float)
+    s = np.asarray(semi_axes, dtype=float)
+    half = max(1, int(n_rings) // 2)
+    units = [np.array([0.0, 0.0, 1.0])]
+    for i in range(1, half + 1):
+        th = (math.pi / 2) * i / half
+        for k in range(n_around):
+            ph = 2 * math.pi * k / n_around
+            units.append(np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]))
+    U = np.array(units)
+    U[np.abs(U[:, 2]) < 1e-12, 2] = 0.0
+    pts = np.vstack([c + U * s, c[None, :]])
+    nrm = U / (s * s)
+    nrm = np.vstack([nrm / np.linalg.norm(nrm, axis=1, keepdims=True), [[0.0, 0.0, -1.0]]])
+    centre = len(pts) - 1
+    counts: list[int] = []
+    idx: list[int] = []
+
+    def ring(i, k):
+        return 1 + (i - 1) * n_around + (k % n_around)
+
+    for k in range(n_around):
+        counts.append(3)
+        idx += [0, ring(1, k), ring(1, k + 1)]
+    for i in range(1, half):
+        for k in range(n_around):
+            counts.append(4)
+            idx += [ring(i, k), ring(i + 1, k), ring(i + 1, k + 1), ring(i, k + 1)]
+    for k in range(n_around):  # the sole, seen from below: clockwise in x-y
+        counts.append(3)
+        idx += [centre, ring(half, k + 1), ring(half, k)]
+    return pts, nrm, counts, idx
+
+
+def box_mesh(center, half_extents):
+    """A closed box: points (8,3), normals (8,3) (corner directions), counts, indices."""
+    c = np.asarray(center, float)
+    h = np.asarray(half_extents, float)
+    U = np.array([[x, y, z] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)], float)
+    faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+    return c + U * h, U / np.sqrt(3.0), [4] * 6, [i for f in faces for i in f]
+
+
+CARRIED_DENSITY = 300.0  # kg/m^3: the drawn size of a carried load (a packed suitcase)
+
+
 def _to_vt(value: Any):
     """Convert plain Python metadata into something a layer's customLayerData can hold."""
     from pxr import Vt
@@ -389,7 +441,7 @@ def _bind_material(prim, mat) -> None:
 
 
 def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, int]) -> None:
-    from pxr import Gf, Sdf, UsdGeom, UsdSkel, Vt
+    from pxr import Gf, Sdf, UsdGeom, UsdPhysics, UsdSkel, Vt
     ch = prep.track.character
     root_path = f"/World/{prep.prim}"
     skel_root = UsdSkel.Root.Define(stage, root_path)
@@ -413,7 +465,11 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
     for attr, val in (("compose:character", prep.track.name), ("compose:preset", ch.preset)):
         skel.GetPrim().CreateAttribute(attr, Sdf.ValueTypeNames.String, custom=True).Set(val)
     skel.GetPrim().CreateAttribute("compose:height", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.height))
-    skel.GetPrim().CreateAttribute("compose:mass", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.mass))
+    # compose:mass is everything the dynamics move (the body and its carried loads, kg)
+    skel.GetPrim().CreateAttribute("compose:mass", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.total_mass))
+    skel.GetPrim().CreateAttribute("compose:bodyMass", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.mass))
+    skel.GetPrim().CreateAttribute("compose:carriedMass", Sdf.ValueTypeNames.Double, custom=True).Set(
+        float(sum(m for _, m in ch.loads)))
 
     # Animation: one sample per frame for translations, rotations and scales.
     anim.CreateJointsAttr(joint_tokens)
@@ -433,16 +489,17 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         ext = Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))])
         ext_attr.Set(ext, code)
 
-    # Meshes: one ellipsoid per body, in the skeleton's space at the bind pose.
+    # Meshes: one solid per body (body.drawn_shapes: ellipsoids, domes for feet and toes), in
+    # the skeleton's space at the bind pose, with the dynamics' mass properties (UsdPhysics).
     mat = _define_material(stage, f"{looks}/{prep.prim}_Material", prep.color)
     joint_of_body = {bi: j for j, bi in enumerate(order)}
     ident = Gf.Matrix4d(1.0)
-    for bi, b in enumerate(ch.bodies):
-        pts, nrm, counts, idx = ellipsoid_mesh(b.center, b.semi_axes, *segments)
+
+    def skinned_mesh(name, bi, pts, nrm, counts, idx, color):
         Rbb, pbb = Rb[0, bi], pb[0, bi]
         pts_w = pts @ Rbb.T + pbb
         nrm_w = nrm @ Rbb.T
-        mesh = UsdGeom.Mesh.Define(stage, f"{root_path}/{prep.prim}_{b.name}")
+        mesh = UsdGeom.Mesh.Define(stage, f"{root_path}/{name}")
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts_w.astype(np.float32))))
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray(counts))
         mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(idx))
@@ -450,14 +507,55 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
         mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, pts_w.min(0))), Gf.Vec3f(*map(float, pts_w.max(0)))]))
-        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*prep.color)]))
+        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*color)]))
         binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
         binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
         binding.CreateJointIndicesPrimvar(constant=True, elementSize=1).Set(Vt.IntArray([joint_of_body[bi]]))
         binding.CreateJointWeightsPrimvar(constant=True, elementSize=1).Set(Vt.FloatArray([1.0]))
         binding.CreateGeomBindTransformAttr(ident)
-        mesh.GetPrim().CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(b.name)
-        _bind_material(mesh.GetPrim(), mat)
+        return mesh, Rbb, pbb
+
+    def mass_api(prim, mass, com_body, inertia_body, Rbb, pbb):
+        """UsdPhysics.MassAPI in the mesh's space (the skeleton's at the bind pose)."""
+        api = UsdPhysics.MassAPI.Apply(prim)
+        api.CreateMassAttr(float(mass))
+        api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, Rbb @ np.asarray(com_body, float) + pbb)))
+        w, V = np.linalg.eigh(Rbb @ np.asarray(inertia_body, float) @ Rbb.T)
+        if np.linalg.det(V) < 0:
+            V[:, 0] *= -1
+        api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, w)))
+        qa = _mat_to_quat(V)
+        api.CreatePrincipalAxesAttr(Gf.Quatf(float(qa[0]), float(qa[1]), float(qa[2]), float(qa[3])))
+
+    for bi, (b, shape) in enumerate(zip(ch.bodies, drawn_shapes(ch))):
+        if shape.kind == "dome":
+            pts, nrm, counts, idx = dome_mesh(shape.center, shape.semi_axes, *segments)
+        else:
+            pts, nrm, counts, idx = ellipsoid_mesh(shape.center, shape.semi_axes, *segments)
+        mesh, Rbb, pbb = skinned_mesh(f"{prep.prim}_{b.name}", bi, pts, nrm, counts, idx, prep.color)
+        prim = mesh.GetPrim()
+        prim.CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(b.name)
+        prim.CreateAttribute("compose:shape", Sdf.ValueTypeNames.String, custom=True).Set(shape.kind)
+        # the dynamics' own numbers: mass, centre, the ellipsoid's inertia (Body.inertia)
+        mass_api(prim, shape.mass, shape.com, b.inertia, Rbb, pbb)
+        _bind_material(prim, mat)
+    # Carried loads (with_extra_mass, e.g. a suitcase): a box centred on the handle that holds
+    # it, skinned to that handle's joint, with the load's mass (the dynamics: a point mass).
+    body_index = {b.name: i for i, b in enumerate(ch.bodies)}
+    for n, (handle, extra) in enumerate(ch.loads):
+        h = ch.handle(handle)
+        bi = body_index[h.body]
+        shape = np.array([0.4, 1.33, 1.0])  # a suitcase's proportions (thin along x, the walking direction)
+        half = 0.5 * shape * (max(extra, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
+        pts, nrm, counts, idx = box_mesh(h.point, half)
+        name = f"{prep.prim}_carried_{n}"
+        _check_name_bytes(name, f"character {prep.track.name!r}: carried object")
+        mesh, Rbb, pbb = skinned_mesh(name, bi, pts, nrm, counts, idx, (0.35, 0.25, 0.15))
+        prim = mesh.GetPrim()
+        prim.CreateAttribute("compose:carried", Sdf.ValueTypeNames.String, custom=True).Set(handle)
+        prim.CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(h.body)
+        mass_api(prim, extra, h.point, np.zeros((3, 3)), Rbb, pbb)
+        _bind_material(prim, mat)
 
 
 def _write_markers(stage, markers: Sequence[Marker], fps: float, t0: int, t1: int, looks: str) -> list[np.ndarray]:

@@ -21,7 +21,7 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
 
 from scenarios.errors import ComposeError, InputError  # noqa: E402
-from scenegraph.body import make_character, standing_pose  # noqa: E402
+from scenegraph.body import drawn_shapes, make_character, standing_pose  # noqa: E402
 from scenegraph.kinematics import numeric_fk  # noqa: E402
 from scenegraph import usd_export  # noqa: E402
 from scenegraph.usd_export import (CharacterTrack, ForceArrow, Marker, export_usd, joint_paths,  # noqa: E402
@@ -220,6 +220,7 @@ def test_skinned_mesh_points_lie_on_our_ellipsoids(stage_path, tracks):
         R, p = numeric_fk(tr.character, tr.q)
         c0 = int(round(tr.start_time * FPS))
         bodies = {b.name: (i, b) for i, b in enumerate(tr.character.bodies)}
+        shapes = {d.body: d for d in drawn_shapes(tr.character)}
         targets = binding.GetSkinningTargets()
         assert len(targets) == 18
         for k in (0, tr.q.shape[0] // 2, tr.q.shape[0] - 1):
@@ -231,9 +232,16 @@ def test_skinned_mesh_points_lie_on_our_ellipsoids(stage_path, tracks):
                 pts = Vt.Vec3fArray(rest)
                 assert skq.ComputeSkinnedPoints(xforms, pts, c0 + k)
                 X = np.asarray(pts, dtype=float)
-                u = (X - p[k, bi]) @ R[k, bi] - np.array(b.center)  # in the body frame
-                s = np.array(b.semi_axes)
-                worst = max(worst, float(np.abs(np.linalg.norm(u / s, axis=1) - 1.0).max()))
+                shape = shapes[b.name]  # the drawn solid: the body's ellipsoid, or a dome for feet and toes
+                u = (X - p[k, bi]) @ R[k, bi] - np.array(shape.center)  # in the body frame
+                s = np.array(shape.semi_axes)
+                r = np.linalg.norm(u / s, axis=1)
+                if shape.kind == "dome":  # the sole (z = 0, inside the rim) and the dome above it
+                    sole = np.abs(u[:, 2]) < 1e-6
+                    assert sole.sum() >= 4 and np.all(r[sole] <= 1.0 + 1e-5) and np.all(u[:, 2] > -1e-6)
+                    r = r[~sole | (r > 0.5)]
+                    u = np.vstack([u, -u[u[:, 2] > 1e-6]])  # its mirror image spans the whole ellipsoid
+                worst = max(worst, float(np.abs(r - 1.0).max()))
                 reach.append(np.abs(u).max(axis=0) / s)
     assert worst < 1e-5, worst
     assert np.all(np.array(reach) > 0.95) and np.all(np.array(reach) < 1.0 + 1e-5)
