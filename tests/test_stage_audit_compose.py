@@ -1,0 +1,96 @@
+"""compose's own stages under `compose audit`: one body geometry (the contact handles lie on
+the drawn soles, the feet rest on the floor when the handles do) and a stage that carries
+everything the dynamics had (carried loads, true masses)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from scenegraph.body import PRESETS, drawn_shapes, make_character, standing_pose
+from scenegraph.kinematics import numeric_fk
+from scenegraph.stage_audit import audit_stage, read_stage
+from scenegraph.usd_export import CharacterTrack, build_stage, export_usd
+
+pxr = pytest.importorskip("pxr")
+
+
+def _handle_world(ch, q, name):
+    R, p = numeric_fk(ch, q[None, :])
+    h = ch.handle(name)
+    bi = [b.name for b in ch.bodies].index(h.body)
+    return R[0, bi] @ np.array(h.point) + p[0, bi]
+
+
+@pytest.mark.parametrize("preset", sorted(PRESETS))
+def test_contact_handles_lie_on_the_drawn_soles(preset, tmp_path):
+    ch = make_character(preset)
+    q = standing_pose(ch)
+    path = export_usd(tmp_path / "s.usda", [CharacterTrack("c", ch, np.tile(q, (5, 1)))], 120.0)
+    samples = read_stage(path)
+    ms = samples.characters[0].meshes
+    P = ms.points[0]
+    for side in ("l", "r"):
+        for handle, body in (("heel", "foot"), ("ball", "foot"), ("toe", "toes")):
+            x = _handle_world(ch, q, f"{handle}_{side}")
+            on = P[ms.vert_mesh == ms.names.index(f"c_{body}_{side}")]
+            assert np.linalg.norm(on - x, axis=1).min() < 1e-6, (handle, side)  # a vertex of the sole rim
+            assert abs(x[2]) < 1e-9  # standing: every handle on the floor
+        for body in ("foot", "toes"):
+            on = P[ms.vert_mesh == ms.names.index(f"c_{body}_{side}")]
+            assert on[:, 2].min() == pytest.approx(0.0, abs=1e-6)  # the drawn sole rests on the floor too
+
+
+def test_drawn_feet_keep_the_dynamics_mass_and_centre():
+    ch = make_character("adult_female")
+    for d, b in zip(drawn_shapes(ch), ch.bodies):
+        assert d.mass == pytest.approx(b.mass) and np.allclose(d.com, b.center)
+        if d.kind == "dome":
+            # the dome's own centre of mass, from its shape, is the body's centre
+            assert d.center[2] + 3 * d.semi_axes[2] / 8 == pytest.approx(b.center[2])
+            assert d.volume * 1000.0 == pytest.approx(b.mass)
+            # what is drawn and the inertia the dynamics use differ by under 30 % (toes), 10 % (foot)
+            rel = np.abs(np.diag(d.inertia) - np.diag(b.inertia)) / np.diag(b.inertia)
+            assert rel.max() < (0.3 if b.name.startswith("toes") else 0.1), (b.name, rel)
+    assert sum(d.kind == "dome" for d in drawn_shapes(ch)) == 4
+
+
+def test_walking_pose_never_puts_the_visible_foot_below_a_handle_on_the_floor(tmp_path):
+    """Heel strike (toes up) and heel-off (on the ball, toes flat): the lowest vertex of each
+    foot is no lower than its lowest contact handle."""
+    ch = make_character()
+    q0 = standing_pose(ch)
+    qs = []
+    for ankle, toe in ((math.radians(20), 0.0), (math.radians(-25), math.radians(25)), (0.0, math.radians(-30))):
+        q = q0.copy()
+        q[ch.dof_index("ankle_flex_l")] = ankle
+        q[ch.dof_index("toe_flex_l")] = toe
+        qs.append(q)
+    path = export_usd(tmp_path / "p.usda", [CharacterTrack("c", ch, np.array(qs * 2))], 120.0)
+    ms = read_stage(path).characters[0].meshes
+    for k, q in enumerate(qs):
+        low = min(_handle_world(ch, q, f"{h}_l")[2] for h in ("heel", "ball", "toe"))
+        foot = np.isin(ms.vert_mesh, [ms.names.index("c_foot_l"), ms.names.index("c_toes_l")])
+        assert ms.points[k, foot, 2].min() >= low - 1e-6
+
+
+def test_stage_carries_the_suitcase_and_the_true_mass(tmp_path):
+    ch = make_character().with_extra_mass("palm_r", 3.0)
+    q = np.tile(standing_pose(ch), (8, 1))
+    stage = build_stage([CharacterTrack("walker", ch, q)], 120.0)
+    skel = stage.GetPrimAtPath("/World/walker/walker_Skeleton")
+    assert skel.GetAttribute("compose:mass").Get() == pytest.approx(76.0)
+    assert skel.GetAttribute("compose:carriedMass").Get() == pytest.approx(3.0)
+    suitcase = stage.GetPrimAtPath("/World/walker/walker_carried_0")
+    assert suitcase.GetAttribute("compose:carried").Get() == "palm_r"
+    from pxr import UsdPhysics
+    assert UsdPhysics.MassAPI(suitcase).GetMassAttr().Get() == pytest.approx(3.0)
+    # its centre is the palm handle at the bind pose
+    com = np.array(UsdPhysics.MassAPI(suitcase).GetCenterOfMassAttr().Get())
+    assert np.allclose(com, _handle_world(ch, standing_pose(ch), "palm_r"), atol=1e-6)
+    path = export_usd(tmp_path / "s.usda", [CharacterTrack("walker", ch, q)], 120.0)
+    rep = audit_stage(path)
+    assert rep["characters"]["walker"]["mass_kg"] == pytest.approx(76.0, abs=1e-3)
+    assert rep["characters"]["walker"]["mesh_mass_kg"]["walker_carried_0"] == pytest.approx(3.0)
+    assert rep["passes"], rep["failures"]  # standing still on the floor
