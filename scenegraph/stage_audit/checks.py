@@ -138,30 +138,37 @@ def contact_support(F: np.ndarray, tau_O: np.ndarray, contact_pts: np.ndarray, g
     return SupportFrame(cop, outside_distance(c2, hull2d(Q)), use, excess, fn)
 
 
-def stance_runs(points: np.ndarray, heights: np.ndarray, contact_tol: float, min_frames: int, dt: float):
+def stance_runs(points: np.ndarray, heights: np.ndarray, contact_tol: float, min_frames: int, dt: float,
+                planted_speed: float = 0.1):
     """Per vertex, its runs of consecutive contact frames.
 
-    Returns (stances, scuffs): stances = runs of at least ``min_frames`` frames as
-    (vertex, first frame, last frame, slide m = the largest horizontal distance from where
-    the vertex was at the run's first frame); scuffs = shorter runs as (vertex, first, last,
-    largest horizontal speed m/s) — a swing foot brushing the floor, not a stance."""
+    A **stance** is a run of at least ``min_frames`` frames in which the vertex is, at some
+    frame, slower than ``planted_speed`` (m/s, horizontal): it was planted (or came to rest).
+    Its slide is the largest horizontal distance from where the vertex was at the run's
+    first frame, so a touch-down or lift-off skid inside the run counts.  A run never slower
+    than ``planted_speed`` is a **scuff**: a swing foot brushing through the contact band,
+    a clearance fault, not sliding.  Short slow runs (a brief touch, a run cut by the clip's
+    ends) are neither.  Returns (stances, scuffs): stances as (vertex, first, last, slide m),
+    scuffs as (vertex, first, last, largest horizontal speed m/s)."""
     inc = heights < contact_tol
     T, N = inc.shape
     stances, scuffs = [], []
     cols = np.nonzero(inc.any(axis=0))[0]
-    vel = None
-    for j in cols:
+    if len(cols) == 0:
+        return stances, scuffs
+    vel = np.gradient(points[:, cols, :2], dt, axis=0) if T > 1 else np.zeros((T, len(cols), 2))
+    speed = np.linalg.norm(vel, axis=2)
+    for c, j in enumerate(cols):
         m = inc[:, j]
         d = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
         starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0] - 1
         for a, b in zip(starts, ends):
-            xy = points[a:b + 1, j, :2]
-            if b - a + 1 >= min_frames:
+            sp = speed[a:b + 1, c]
+            if sp.min() >= planted_speed:
+                scuffs.append((int(j), int(a), int(b), float(sp.max())))
+            elif b - a + 1 >= min_frames:
+                xy = points[a:b + 1, j, :2]
                 stances.append((int(j), int(a), int(b), float(np.linalg.norm(xy - xy[0], axis=1).max())))
-            else:
-                if vel is None:
-                    vel = np.gradient(points[..., :2], dt, axis=0) if T > 1 else np.zeros_like(points[..., :2])
-                scuffs.append((int(j), int(a), int(b), float(np.linalg.norm(vel[a:b + 1, j], axis=1).max())))
     return stances, scuffs
 
 

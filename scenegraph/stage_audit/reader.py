@@ -14,6 +14,9 @@ Mass of a mesh (kg), first that applies:
 A mesh whose volume is not positive (open, inside-out, or a flat card) carries no mass and
 is listed in ``massless``.  Mass is spread uniformly through the mesh's volume.
 
+Asked-for contacts between characters (held hands, a tackle) may be listed in the layer's
+``customLayerData["compose"]["allowedContacts"]`` as patterns 'charA/meshA~charB/meshB'.
+
 Ground: the plane z = 0 plus every mesh outside the characters whose prim has
 ``compose:kind`` = "slope" or "ground" (or lies under ``/World/Ground``): the ground height
 under a point is the highest upward-facing triangle of those meshes above it, else 0.
@@ -106,6 +109,7 @@ class StageSamples:
     up_axis: str
     meters_per_unit: float
     debug_forces: tuple = ()  # (character, kind, origins (T,3), vectors (T,3)) from compose's debug prims
+    allowed_contacts: tuple[str, ...] = ()  # the stage's own list (customLayerData compose.allowedContacts)
 
 
 def _triangulate(counts, indices) -> np.ndarray:
@@ -249,7 +253,10 @@ def read_stage(path, fps: float | None = None) -> StageSamples:
 
     ground = _read_ground(stage, skel_roots, codes[0], up, mpu)
     forces = _read_debug_forces(stage, codes, up, mpu)
-    return StageSamples(str(path), times, rate, tcps, tuple(chars), ground, up, mpu, forces)
+    info = stage.GetRootLayer().customLayerData.get("compose", {}) or {}
+    allowed = info.get("allowedContacts", ()) if hasattr(info, "get") else ()
+    allowed = tuple(str(a) for a in allowed) if not isinstance(allowed, str) else (allowed,)
+    return StageSamples(str(path), times, rate, tcps, tuple(chars), ground, up, mpu, forces, allowed)
 
 
 def _read_ground(stage, skel_roots, code, up: str, mpu: float) -> Ground:

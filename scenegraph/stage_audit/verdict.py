@@ -98,7 +98,8 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
     dt = 1.0 / samples.fps
     T = len(samples.times)
     chars = {c.name: c for c in samples.characters}
-    pairs = overlaps(samples.characters, settings.contact_tol, settings.allowed_contacts)
+    allowed = tuple(settings.allowed_contacts) + tuple(samples.allowed_contacts)
+    pairs = overlaps(samples.characters, settings.contact_tol, allowed)
     mom = {n: momenta(c.meshes.points, c.meshes.tris, c.meshes.tri_mesh, c.meshes.vert_mesh, c.meshes.density, dt)
            for n, c in chars.items()}
     heights = {n: heights_above_ground(c.meshes.points, samples.ground) for n, c in chars.items()}
@@ -240,7 +241,8 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
         "t0": _r(samples.times[0], 5), "t1": _r(samples.times[-1], 5),
         "up_axis": samples.up_axis, "meters_per_unit": samples.meters_per_unit,
         "ground": "flat z = 0" if samples.ground.flat else f"z = 0 and {len(samples.ground.triangles)} ramp triangles",
-        "settings": {k: v for k, v in asdict(settings).items() if k != "tolerances"},
+        "settings": {**{k: v for k, v in asdict(settings).items() if k != "tolerances"},
+                     "allowed_contacts": list(allowed)},
         "tolerances": limits,
         "characters": report_chars, "systems": systems, "pairs": pair_rep,
         "summary": summary, "passes": not failures, "verdict": "pass" if not failures else "fail",

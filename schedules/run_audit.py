@@ -1,0 +1,71 @@
+"""The hook that runs ``compose audit`` on what ``compose run`` wrote (issue #15).
+
+The stage audit reads only the stage.  It needs 120 Hz samples (finite differences of a
+30 fps stage see UsdSkel's interpolation, not the motion), so when the run's ``--fps`` is
+not 120 the same scene is also exported at 120 Hz into the run folder
+(``stage_120hz.usdc``) and that stage is audited.  Characters that touch are audited as one
+system (``groups=auto``) and the contacts the scenario asks for — the hands of a coupling,
+the tackler on its target — are listed in the stage (``allowedContacts``) so overlaps there
+do not count.  The verdict joins the run report as ``stage_audit``; it does not change the
+run's exit code (the run's own audit and goals do; see docs/audit.md).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["AUDIT_FPS", "allowed_contacts", "audit_run_stage"]
+
+AUDIT_FPS = 120.0
+
+
+def allowed_contacts(scene) -> list[str]:
+    """Overlap patterns ('charA/meshA~charB/meshB') of the contacts a scene asks for."""
+    from scenegraph.usd_export import character_prim_name as prim
+    out = []
+    bodies = {c.name: c.character for c in scene.characters}
+    for cpl in scene.couplings:
+        hs = [(who, bodies[who].handle(h).body) for who, h in cpl.handles if who in bodies]
+        for i, (a, ba) in enumerate(hs):
+            for b, bb in hs[i + 1:]:
+                if a != b:
+                    out.append(f"{prim(a)}/{prim(a)}_{ba}~{prim(b)}/{prim(b)}_{bb}")
+    for g in scene.goals:
+        if g.type == "tackle" and g.partner:
+            out.append(f"{prim(g.character)}/*~{prim(g.partner)}/*")
+    return sorted(set(out))
+
+
+def audit_run_stage(scene, out_path: Path, fps: float, run_dir: Path, metadata: dict, log=None) -> dict:
+    """Audit the stage a run wrote (at 120 Hz, see the module doc); returns the report's
+    ``stage_audit`` entry: the summary, the verdict, the failures and the audited file.  An
+    error inside the audit is recorded (``error``) and printed, never raised: the run's
+    stage and report are already good."""
+    try:
+        rep = _audit(scene, out_path, fps, run_dir, metadata)
+    except Exception as exc:  # noqa: BLE001 - a finished run must still write its report
+        if log is not None:
+            print(f"compose: warning: stage audit not done: {exc}", file=log, flush=True)
+        return {"passes": None, "verdict": "error", "error": f"{type(exc).__name__}: {exc}"}
+    if log is not None:
+        from .cli_audit import summary_line
+        print(f"compose: stage {summary_line(rep)}", file=log, flush=True)
+    return {"stage": rep["stage"], "fps": AUDIT_FPS, "passes": rep["passes"], "verdict": rep["verdict"],
+            "failures": rep["failures"], "summary": rep["summary"],
+            "systems": {k: {kk: vv for kk, vv in v.items() if kk != "frames"} for k, v in rep["systems"].items()},
+            "pairs": rep["pairs"]}
+
+
+def _audit(scene, out_path, fps, run_dir, metadata) -> dict:
+    from scenegraph.stage_audit import AuditSettings, audit_stage
+    from scenegraph.usd_export import CharacterTrack, export_usd
+    path = Path(out_path)
+    if abs(float(fps) - AUDIT_FPS) > 1e-9:
+        tracks = []
+        for c in scene.characters:
+            times, q = c.motion.sample(AUDIT_FPS)
+            tracks.append(CharacterTrack(c.name, c.character, np.asarray(q, float), float(times[0])))
+        path = export_usd(Path(run_dir) / "stage_120hz.usdc", tracks, AUDIT_FPS, metadata=metadata,
+                          ground=scene.ground)
+    return audit_stage(path, AUDIT_FPS, AuditSettings(groups=("auto",)))
