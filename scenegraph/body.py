@@ -350,10 +350,16 @@ def make_character(preset: str = "adult_male", height: float | None = None, mass
 class DrawnShape:
     """The visible solid of one body, in the body's frame (m).
 
-    ``kind`` "ellipsoid": centre ``center``, semi-axes ``semi_axes``.  ``kind`` "dome": the
-    upper half of an ellipsoid cut at its equator, a flat sole; ``center`` is the centre of
-    the sole (its lowest plane), ``semi_axes`` = (half length along x, half width along y,
-    height).  ``mass`` (kg) is the body's own (loads removed) and ``com`` its centre."""
+    ``kind`` "ellipsoid": centre ``center``, semi-axes ``semi_axes``.
+
+    ``kind`` "keel" (feet and toes): a spindle lying on a straight keel.  ``center`` is the
+    keel's midpoint, the keel runs along x from −a to +a at that height, and the cross-
+    section at x = a·u is an ellipse with semi-axes (b·s, c·s), s = sqrt(1 − u²), whose
+    lowest point is on the keel (``semi_axes`` = (a, b, c)).  Its ends (the keel's ends) are
+    the contact handles; rolled by ψ about the keel it dips at most b² ψ² / (2c) below it.
+    Volume 4/3 π a b c; centre of mass 9π/32 · c above the keel.
+
+    ``mass`` (kg) is the body's own (loads removed) and ``com`` its centre of mass."""
 
     body: str
     kind: str
@@ -365,14 +371,14 @@ class DrawnShape:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(centre, half extents) of the solid's axis-aligned box in the body frame (m)."""
         c, s = np.array(self.center, float), np.array(self.semi_axes, float)
-        if self.kind == "dome":
-            return c + [0.0, 0.0, s[2] / 2], np.array([s[0], s[1], s[2] / 2])
+        if self.kind == "keel":
+            return c + [0.0, 0.0, s[2]], s
         return c, s
 
     @property
     def volume(self) -> float:
         a, b, c = self.semi_axes
-        return (4.0 if self.kind == "ellipsoid" else 2.0) / 3.0 * math.pi * a * b * c
+        return 4.0 / 3.0 * math.pi * a * b * c
 
     @property
     def inertia(self) -> np.ndarray:
@@ -381,9 +387,14 @@ class DrawnShape:
         m = self.mass
         if self.kind == "ellipsoid":
             return m / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
-        d = 3.0 * c / 8.0  # half-ellipsoid: centre of mass 3c/8 above the sole
-        return np.diag([m / 5.0 * (b * b + c * c) - m * d * d, m / 5.0 * (a * a + c * c) - m * d * d,
-                        m / 5.0 * (a * a + b * b)])
+        u, w = np.polynomial.legendre.leggauss(64)  # slices along the keel
+        s = np.sqrt(1.0 - u * u)
+        dm = w * s * s / np.sum(w * s * s) * m  # slice mass ∝ its area π b c s²
+        zc = c * s - 9.0 * math.pi / 32.0 * c  # slice centre above the solid's centre of mass
+        x = a * u
+        yy, zz = dm * (b * s) ** 2 / 4.0, dm * (c * s) ** 2 / 4.0 + dm * zc * zc
+        xx = dm * x * x
+        return np.diag([np.sum(yy + zz), np.sum(xx + zz), np.sum(xx + yy)])
 
 
 def _own_mass_and_center(ch: Character, b: Body) -> tuple[float, np.ndarray]:
@@ -397,31 +408,43 @@ def _own_mass_and_center(ch: Character, b: Body) -> tuple[float, np.ndarray]:
     return m, mc / m
 
 
+KEEL_COM = 9.0 * math.pi / 32.0  # a keel solid's centre of mass above its keel, per unit c
+
+
 def drawn_shapes(ch: Character) -> tuple[DrawnShape, ...]:
     """The solid drawn for each body (in ``ch.bodies`` order): the dynamics' ellipsoid, except
-    that each foot and each toes segment is a dome whose flat sole holds its contact handles
-    (heel and ball on the foot's sole rim, the toe tip on the toes' rim), so that the visible
-    feet rest on the floor exactly when the handles do.  A dome keeps the body's mass (at the
-    model's density, 1000 kg/m³) and centre of mass; its inertia is the dome's, not the
-    ellipsoid's the dynamics use (docs/usd-output.md gives the difference)."""
+    each foot and each toes segment, drawn as a keel solid (see :class:`DrawnShape`) whose
+    keel joins its contact handles — heel to ball on the foot, ball to toe tip on the toes —
+    so the visible feet rest on the floor exactly when the handles do.  Each keel keeps the
+    body's centre of mass.  The foot keeps its volume at the model's density (1000 kg/m³);
+    the toes are drawn as wide as the foot, so their smaller volume holds their mass at
+    about 2100 kg/m³ (the stage states every mass with UsdPhysics).  Inertias: the drawn
+    solids' differ from the ellipsoids' the dynamics use (docs/usd-output.md)."""
     out = []
+    foot_half_width: dict[str, float] = {}
     for b in ch.bodies:
         m, c = _own_mass_and_center(ch, b)
         kind, center, semi = "ellipsoid", tuple(float(x) for x in c), b.semi_axes
         side = b.name.rsplit("_", 1)[-1]
-        rims = None
+        ends = None
         if b.name.startswith("foot_"):
-            rims = (ch.handle(f"heel_{side}").point, ch.handle(f"ball_{side}").point)
+            ends = (ch.handle(f"heel_{side}").point, ch.handle(f"ball_{side}").point)
         elif b.name.startswith("toes_"):
             tip = ch.handle(f"toe_{side}").point
-            rims = ((0.0, 0.0, tip[2]), tip)
-        if rims is not None:
-            (x0, _, z0), (x1, _, _) = rims
+            ends = ((0.0, 0.0, tip[2]), tip)
+        if ends is not None:
+            (x0, _, z0), (x1, _, z1) = ends
             a = (x1 - x0) / 2.0
-            h = 8.0 / 3.0 * (c[2] - z0)  # the dome's centre of mass lies 3h/8 above its sole
-            if a > 0 and h > 0 and abs(c[0] - (x0 + x1) / 2.0) < 1e-9 and abs(c[1]) < 1e-9:
-                w = m / (DENSITY * 2.0 / 3.0 * math.pi * a * h)
-                kind, center, semi = "dome", ((x0 + x1) / 2.0, 0.0, float(z0)), (float(a), float(w), float(h))
+            hc = (c[2] - z0) / KEEL_COM
+            if not (a > 0 and hc > 0 and abs(z1 - z0) < 1e-12 and abs(c[0] - (x0 + x1) / 2.0) < 1e-9
+                    and abs(c[1]) < 1e-9):
+                raise InputError(f"body {b.name!r}: its centre of mass is not above the middle of its contact handles")
+            if b.name.startswith("foot_"):
+                w = m / (DENSITY * 4.0 / 3.0 * math.pi * a * hc)
+                foot_half_width[side] = w
+            else:
+                w = foot_half_width.get(side, b.semi_axes[1])
+            kind, center, semi = "keel", ((x0 + x1) / 2.0, 0.0, float(z0)), (float(a), float(w), float(hc))
         out.append(DrawnShape(b.name, kind, center, tuple(float(x) for x in semi), float(m),
                               tuple(float(x) for x in c)))
     return tuple(out)

@@ -78,7 +78,7 @@ def skeleton_of(ch: Character) -> tuple[BvhSkeleton, list[int]]:
     has_child = set(parents)
     for j, bi in enumerate(order):
         if j not in has_child:
-            ends[j] = end_site_of(*drawn[bi].bounds())  # the drawn solid (a dome for the toes)
+            ends[j] = end_site_of(*drawn[bi].bounds())  # the drawn solid (a keel solid for the toes)
     return BvhSkeleton(tuple(names), tuple(parents), offsets, ends), order
 
 

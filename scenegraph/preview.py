@@ -121,7 +121,7 @@ def have_ffmpeg() -> bool:
 
 def _drawn_ellipsoids(ch, pos: dict) -> list:
     """(joint, centre, semi-axes) of the box around each solid the stage draws (body frame, m):
-    what :func:`scene_from_stage` reads back from the meshes (domes for feet and toes,
+    what :func:`scene_from_stage` reads back from the meshes (keel solids for feet and toes,
     carried loads as boxes on their handles)."""
     from .body import drawn_shapes
     from .usd_export import CARRIED_DENSITY

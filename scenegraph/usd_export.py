@@ -284,44 +284,46 @@ def ellipsoid_mesh(center, semi_axes, n_around: int = 16, n_rings: int = 10):
     return pts, nrm, counts, idx
 
 
-def dome_mesh(sole_center, semi_axes, n_around: int = 16, n_rings: int = 10):
-    """The upper half of an ellipsoid over a flat sole: points (N,3), normals (N,3), counts,
-    indices.  ``sole_center`` is the sole's centre, ``semi_axes`` (a, b, height).  The rim
-    (the sole's outline) has ``n_around`` points, the first at +x and, for even counts, one
-    at −x (where a foot's ball and heel handles sit); the sole is a fan around its centre.
-    Normals: the ellipsoid's on the dome, −z on the sole (rim points use the dome's)."""
-    c = np.asarray(sole_center, dtype=float)
-    s = np.asarray(semi_axes, dtype=float)
-    half = max(1, int(n_rings) // 2)
-    units = [np.array([0.0, 0.0, 1.0])]
-    for i in range(1, half + 1):
-        th = (math.pi / 2) * i / half
+def keel_mesh(keel_center, semi_axes, n_around: int = 16, n_rings: int = 10):
+    """A keel solid (see :class:`~scenegraph.body.DrawnShape`): points (N,3), normals (N,3),
+    counts, indices.  ``keel_center`` is the keel's midpoint, ``semi_axes`` (a, b, c).  The
+    two ends (x = ∓a, on the keel) are single vertices, and every cross-section ring has a
+    vertex on the keel, so the keel is drawn exactly.  Faces wind outward."""
+    c0 = np.asarray(keel_center, dtype=float)
+    a, b, c = (float(x) for x in semi_axes)
+    n_len = max(2, int(n_rings))
+    pts = [c0 + [-a, 0.0, 0.0]]
+    nrm = [np.array([-1.0, 0.0, 0.0])]
+    for i in range(1, n_len):
+        u = -math.cos(math.pi * i / n_len)
+        s = math.sqrt(max(0.0, 1.0 - u * u))
         for k in range(n_around):
-            ph = 2 * math.pi * k / n_around
-            units.append(np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]))
-    U = np.array(units)
-    U[np.abs(U[:, 2]) < 1e-12, 2] = 0.0
-    pts = np.vstack([c + U * s, c[None, :]])
-    nrm = U / (s * s)
-    nrm = np.vstack([nrm / np.linalg.norm(nrm, axis=1, keepdims=True), [[0.0, 0.0, -1.0]]])
-    centre = len(pts) - 1
+            ph = 2 * math.pi * k / n_around - math.pi / 2  # k = 0: the lowest point, on the keel
+            y, z = math.cos(ph), math.sin(ph)
+            pts.append(c0 + [a * u, b * s * y, c * s * (1.0 + z)])
+            # the gradient of (y/bs)² + ((z − cs)/cs)² − 1 ignoring the slow change of s: a fair normal
+            n = np.array([-u / max(a, 1e-12) * 0.5 * s, y / max(b, 1e-12), z / max(c, 1e-12)])
+            nrm.append(n / np.linalg.norm(n))
+    pts.append(c0 + [a, 0.0, 0.0])
+    nrm.append(np.array([1.0, 0.0, 0.0]))
+    last = len(pts) - 1
     counts: list[int] = []
     idx: list[int] = []
 
     def ring(i, k):
         return 1 + (i - 1) * n_around + (k % n_around)
 
-    for k in range(n_around):
+    for k in range(n_around):  # the rear tip
         counts.append(3)
-        idx += [0, ring(1, k), ring(1, k + 1)]
-    for i in range(1, half):
+        idx += [0, ring(1, k + 1), ring(1, k)]
+    for i in range(1, n_len - 1):
         for k in range(n_around):
             counts.append(4)
-            idx += [ring(i, k), ring(i + 1, k), ring(i + 1, k + 1), ring(i, k + 1)]
-    for k in range(n_around):  # the sole, seen from below: clockwise in x-y
+            idx += [ring(i, k), ring(i, k + 1), ring(i + 1, k + 1), ring(i + 1, k)]
+    for k in range(n_around):  # the front tip
         counts.append(3)
-        idx += [centre, ring(half, k + 1), ring(half, k)]
-    return pts, nrm, counts, idx
+        idx += [last, ring(n_len - 1, k), ring(n_len - 1, k + 1)]
+    return np.array(pts), np.array(nrm), counts, idx
 
 
 def box_mesh(center, half_extents):
@@ -489,7 +491,7 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         ext = Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))])
         ext_attr.Set(ext, code)
 
-    # Meshes: one solid per body (body.drawn_shapes: ellipsoids, domes for feet and toes), in
+    # Meshes: one solid per body (body.drawn_shapes: ellipsoids, keel solids for feet and toes), in
     # the skeleton's space at the bind pose, with the dynamics' mass properties (UsdPhysics).
     mat = _define_material(stage, f"{looks}/{prep.prim}_Material", prep.color)
     joint_of_body = {bi: j for j, bi in enumerate(order)}
@@ -528,8 +530,8 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         api.CreatePrincipalAxesAttr(Gf.Quatf(float(qa[0]), float(qa[1]), float(qa[2]), float(qa[3])))
 
     for bi, (b, shape) in enumerate(zip(ch.bodies, drawn_shapes(ch))):
-        if shape.kind == "dome":
-            pts, nrm, counts, idx = dome_mesh(shape.center, shape.semi_axes, *segments)
+        if shape.kind == "keel":
+            pts, nrm, counts, idx = keel_mesh(shape.center, shape.semi_axes, *segments)
         else:
             pts, nrm, counts, idx = ellipsoid_mesh(shape.center, shape.semi_axes, *segments)
         mesh, Rbb, pbb = skinned_mesh(f"{prep.prim}_{b.name}", bi, pts, nrm, counts, idx, prep.color)
