@@ -121,3 +121,34 @@ def test_stage_carries_the_suitcase_and_the_true_mass(tmp_path):
     assert rep["characters"]["walker"]["mass_kg"] == pytest.approx(76.0, abs=1e-3)
     assert rep["characters"]["walker"]["mesh_mass_kg"]["walker_carried_0"] == pytest.approx(3.0)
     assert rep["passes"], rep["failures"]  # standing still on the floor
+
+
+def test_ramps_preview_at_their_height_and_audit_on_them(tmp_path):
+    """A standing figure on a 10° ramp: the preview draws the ramp's top where the ramp is
+    (not flat, not as a marker) and the auditor measures heights above the ramp."""
+    from scenegraph import preview
+    from scenegraph.ground import Ground, Plane
+    ramp = Plane(math.radians(10.0), 0.0, (-1.0, -1.0, 2.0, 1.0), (-1.0, 0.0), name="ramp")
+    ground = Ground(planes=(ramp,))
+    ch = make_character()
+    q = np.tile(standing_pose(ch), (10, 1))
+    q[:, 0] = 1.0
+    # lift the level feet 5 cm above the ramp's height under the pelvis (~0.35 m); the toes,
+    # 0.2 m ahead, are then 5 − 3.5 cm above the ramp
+    q[:, 2] += ramp.plane_height(1.0, 0.0) + 0.05
+    path = export_usd(tmp_path / "r.usda", [CharacterTrack("c", ch, q)], 120.0, ground=ground)
+    sc = preview.scene_from_stage(path)
+    assert all(m.kind != "slope" for m in sc.markers)
+    assert len(sc.ramps) == 1
+    top = sc.ramps[0]
+    assert np.allclose(top[:, 2], [ramp.plane_height(x, y) for x, y in top[:, :2]], atol=1e-6)
+    assert top[:, 2].max() > 0.5
+    rep = audit_stage(path)
+    assert "ramp triangles" in rep["ground"]
+    assert rep["characters"]["c"]["penetration_max_mm"] == 0.0
+    q2 = q.copy()
+    q2[:, 2] -= 0.10  # now the feet go into the ramp
+    rep2 = audit_stage(export_usd(tmp_path / "r2.usda", [CharacterTrack("c", ch, q2)], 120.0, ground=ground))
+    assert rep2["characters"]["c"]["penetration_max_mm"] > 20.0
+    flat = audit_stage(export_usd(tmp_path / "r3.usda", [CharacterTrack("c", ch, q2)], 120.0))
+    assert flat["characters"]["c"]["penetration_max_mm"] == 0.0  # the same pose above a flat floor
