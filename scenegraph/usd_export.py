@@ -122,6 +122,7 @@ class ForceArrow:
     kind: str = "force"
     scale: float = 1e-3  # m per N
     start_time: float = 0.0
+    character: str | None = None  # who feels it (written as compose:character; compose audit reads it)
 
 
 # --- helpers -----------------------------------------------------------------------------------
@@ -690,6 +691,9 @@ def _write_forces(stage, forces: Sequence[ForceArrow], fps: float) -> None:
         prim = curves.GetPrim()
         prim.CreateAttribute("compose:kind", Sdf.ValueTypeNames.String, custom=True).Set(f.kind)
         prim.CreateAttribute("compose:scale", Sdf.ValueTypeNames.Double, custom=True).Set(float(f.scale))
+        if f.character is not None:
+            prim.CreateAttribute("compose:character", Sdf.ValueTypeNames.String, custom=True).Set(
+                character_prim_name(f.character))
         force_attr = prim.CreateAttribute("compose:force", Sdf.ValueTypeNames.Double3, custom=True)
         pa, ea = curves.CreatePointsAttr(), curves.CreateExtentAttr()
         for k in range(o.shape[0]):

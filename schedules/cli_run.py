@@ -253,7 +253,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
                     "versions": _versions(), "energies": energies,
                     "allowedContacts": allowed_contacts(final)}  # hook (issue #15): contacts asked for
         export_usd(out_path, tracks, fps, markers=markers, metadata=metadata, ground=final.ground)
-        stage_audit = audit_run_stage(final, out_path, fps, rdir, metadata, log)  # hook (issue #15)
+        stage_audit = audit_run_stage(final, out_path, fps, rdir, metadata, log,  # hook (issue #15)
+                                      result.contact_forces)
 
         rep = {
             "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),

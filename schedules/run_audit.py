@@ -1,9 +1,10 @@
 """The hook that runs ``compose audit`` on what ``compose run`` wrote (issue #15).
 
 The stage audit reads only the stage.  It needs 120 Hz samples (finite differences of a
-30 fps stage see UsdSkel's interpolation, not the motion), so when the run's ``--fps`` is
-not 120 the same scene is also exported at 120 Hz into the run folder
-(``stage_120hz.usdc``) and that stage is audited.  Characters that touch are audited as one
+30 fps stage see UsdSkel's interpolation, not the motion), so the same scene is also
+exported at 120 Hz into the run folder (``stage_120hz.usdc``), with compose's contact and
+coupling forces as debug force prims (``/World/Debug``), and that stage is audited: its
+``residual_vs_stage_forces`` is what compose's own forces leave unexplained at 120 Hz.  Characters that touch are audited as one
 system (``groups=auto``) and the contacts the scenario asks for — the hands of a coupling,
 the tackler on its target — are listed in the stage (``allowedContacts``) so overlaps there
 do not count.  The verdict joins the run report as ``stage_audit``; it does not change the
@@ -15,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AUDIT_FPS", "allowed_contacts", "audit_run_stage"]
+__all__ = ["AUDIT_FPS", "allowed_contacts", "audit_run_stage", "force_arrows"]
 
 AUDIT_FPS = 120.0
 
@@ -37,13 +38,43 @@ def allowed_contacts(scene) -> list[str]:
     return sorted(set(out))
 
 
-def audit_run_stage(scene, out_path: Path, fps: float, run_dir: Path, metadata: dict, log=None) -> dict:
+def force_arrows(scene, contact_forces: dict, fps: float) -> list:
+    """compose's contact and coupling forces as debug force prims at every frame: each
+    handle's force (N, world) interpolated linearly between the solver's times (zero outside
+    them), applied at the handle.  The shoe springs are not among them."""
+    from scenegraph.kinematics import numeric_fk
+    from scenegraph.usd_export import ForceArrow
+    out = []
+    for c in scene.characters:
+        forces = (contact_forces or {}).get(c.name) or {}
+        if not forces:
+            continue
+        times, q = c.motion.sample(fps)
+        times = np.asarray(times, float)
+        R, p = numeric_fk(c.character, np.asarray(q, float))
+        names = [b.name for b in c.character.bodies]
+        for handle, (ht, hf) in sorted(forces.items()):
+            ht = np.asarray(ht, float)
+            hf = np.asarray(hf, float).reshape(-1, 3)
+            if len(ht) == 0:
+                continue
+            V = np.stack([np.interp(times, ht, hf[:, d], left=0.0, right=0.0) for d in range(3)], 1)
+            h = c.character.handle(handle)
+            bi = names.index(h.body)
+            O = np.einsum("tij,j->ti", R[:, bi], np.asarray(h.point, float)) + p[:, bi]
+            kind = "coupling" if handle.startswith("palm") else "contact"
+            out.append(ForceArrow(f"{c.name}_{handle}", O, V, kind, 1e-3, float(times[0]), c.name))
+    return out
+
+
+def audit_run_stage(scene, out_path: Path, fps: float, run_dir: Path, metadata: dict, log=None,
+                    contact_forces: dict | None = None) -> dict:
     """Audit the stage a run wrote (at 120 Hz, see the module doc); returns the report's
     ``stage_audit`` entry: the summary, the verdict, the failures and the audited file.  An
     error inside the audit is recorded (``error``) and printed, never raised: the run's
     stage and report are already good."""
     try:
-        rep = _audit(scene, out_path, fps, run_dir, metadata)
+        rep = _audit(scene, out_path, fps, run_dir, metadata, contact_forces)
     except Exception as exc:  # noqa: BLE001 - a finished run must still write its report
         if log is not None:
             print(f"compose: warning: stage audit not done: {exc}", file=log, flush=True)
@@ -57,15 +88,16 @@ def audit_run_stage(scene, out_path: Path, fps: float, run_dir: Path, metadata: 
             "pairs": rep["pairs"]}
 
 
-def _audit(scene, out_path, fps, run_dir, metadata) -> dict:
+def _audit(scene, out_path, fps, run_dir, metadata, contact_forces) -> dict:
     from scenegraph.stage_audit import AuditSettings, audit_stage
     from scenegraph.usd_export import CharacterTrack, export_usd
     path = Path(out_path)
-    if abs(float(fps) - AUDIT_FPS) > 1e-9:
+    arrows = force_arrows(scene, contact_forces, AUDIT_FPS)
+    if abs(float(fps) - AUDIT_FPS) > 1e-9 or arrows:
         tracks = []
         for c in scene.characters:
             times, q = c.motion.sample(AUDIT_FPS)
             tracks.append(CharacterTrack(c.name, c.character, np.asarray(q, float), float(times[0])))
         path = export_usd(Path(run_dir) / "stage_120hz.usdc", tracks, AUDIT_FPS, metadata=metadata,
-                          ground=scene.ground)
+                          ground=scene.ground, debug_forces=arrows)
     return audit_stage(path, AUDIT_FPS, AuditSettings(groups=("auto",)))

@@ -190,6 +190,34 @@ def test_pushed_body_needs_exactly_the_push(tmp_path):
     assert not rep["passes"] and any("flight_wrench_rms_bw" in x for x in rep["failures"])
 
 
+def test_force_prims_on_the_stage_explain_the_push(tmp_path):
+    """compose's debug force prims (compose:force, compose:character): what they supply is
+    subtracted from what the motion needs."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+    fps, m = 120.0, 12.5
+    t = np.arange(0, 0.3, 1 / fps)
+    Fext = np.array([30.0, -20.0, 60.0])
+    p = np.array([0, 0, 1.5]) + 0.5 * (Fext / m + [0, 0, -G]) * t[:, None] ** 2
+    P, F = box_mesh(SIZE)
+    path = write_stage(tmp_path / "f.usda", [dict(name="crate", points=P, faces=F,
+                                                  R=np.tile(np.eye(3), (len(t), 1, 1)), p=p, mass=m)], fps)
+    stage = Usd.Stage.Open(str(path))
+    for name, share in (("push_a", 0.5), ("push_b", 0.25)):
+        c = UsdGeom.BasisCurves.Define(stage, f"/World/Debug/{name}")
+        c.CreateCurveVertexCountsAttr(Vt.IntArray([2]))
+        prim = c.GetPrim()
+        prim.CreateAttribute("compose:character", Sdf.ValueTypeNames.String, custom=True).Set("crate")
+        fa = prim.CreateAttribute("compose:force", Sdf.ValueTypeNames.Double3, custom=True)
+        for k in range(len(t)):
+            fa.Set(Gf.Vec3d(*(share * Fext)), k)
+            c.CreatePointsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, p[k])), Gf.Vec3f(*map(float, p[k] + 0.1))]), k)
+    stage.GetRootLayer().Save()
+    rep = audit_stage(path)
+    s = rep["systems"]["crate"]
+    assert s["residual_vs_stage_forces_max_bw"] == pytest.approx(0.25 * np.linalg.norm(Fext) / (m * G), rel=2e-3)
+    assert rep["summary"]["residual_vs_stage_forces_max_bw"] == s["residual_vs_stage_forces_max_bw"]
+
+
 def test_y_up_centimetre_stage_gives_the_same_figures(tmp_path):
     fps, m = 120.0, 12.5
     t = np.arange(0, 0.5, 1 / fps)

@@ -152,3 +152,32 @@ def test_ramps_preview_at_their_height_and_audit_on_them(tmp_path):
     assert rep2["characters"]["c"]["penetration_max_mm"] > 20.0
     flat = audit_stage(export_usd(tmp_path / "r3.usda", [CharacterTrack("c", ch, q2)], 120.0))
     assert flat["characters"]["c"]["penetration_max_mm"] == 0.0  # the same pose above a flat floor
+
+
+def test_run_hook_audits_a_120hz_stage_with_compose_forces(tmp_path):
+    """schedules.run_audit (what compose run calls after writing its stage), on the bundled
+    handhold scene's initial motions (no solve): the 120 Hz stage is written with the hands'
+    asked-for contact and the forces, and the verdict comes back for the report."""
+    import io
+    from pxr import Usd
+    from scenarios.loader import load_scenario
+    from scenegraph.scene import build_scene
+    from schedules.run_audit import allowed_contacts, audit_run_stage
+    scene = build_scene(load_scenario("handhold"))
+    allowed = allowed_contacts(scene)
+    assert allowed and all("hand" in a for a in allowed)
+    c = scene.characters[0]
+    t = np.linspace(c.motion.start, c.motion.end, 7)
+    forces = {c.name: {"heel_l": (t, np.tile([0.0, 0.0, 300.0], (7, 1)))}}
+    log = io.StringIO()
+    rep = audit_run_stage(scene, tmp_path / "unused.usda", 30.0, tmp_path, {"allowedContacts": allowed}, log, forces)
+    stage = tmp_path / "stage_120hz.usdc"
+    assert rep["stage"] == str(stage) and stage.is_file()
+    assert rep["verdict"] in ("pass", "fail") and set(rep["summary"]) >= {"penetration_max_mm", "mass_kg"}
+    assert "compose: stage audit:" in log.getvalue()
+    st = Usd.Stage.Open(str(stage))
+    assert list(st.GetRootLayer().customLayerData["compose"]["allowedContacts"]) == allowed
+    arrow = st.GetPrimAtPath(f"/World/Debug/{c.name}_heel_l")
+    assert arrow.GetAttribute("compose:character").Get() == c.name
+    assert np.allclose(arrow.GetAttribute("compose:force").Get(12), (0, 0, 300.0))
+    assert any("residual_vs_stage_forces_max_bw" in s for s in rep["systems"].values())

@@ -205,7 +205,7 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
         if forces:  # compose's own contact/coupling forces on the stage: the rest is root residual
             Fs = sum(f[3] for f in forces)
             r = np.linalg.norm(M.force - Fs, axis=1)[valid] / bw
-            sysrep["residual_vs_stage_forces_max_bw"] = _r(r.max())
+            sysrep["residual_vs_stage_forces_max_bw"] = _r(r.max(), 6)
             sysrep["residual_vs_stage_forces_rms_bw"] = _r(np.sqrt(np.mean(r ** 2)))
         systems["+".join(g)] = sysrep
 
@@ -223,6 +223,8 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
         "friction_use_max": max(s["friction_use_max"] for s in systems.values()),
         "flight_torque_rms_bw_rg": max(s["flight_torque_rms_bw_rg"] for s in systems.values()),
         "free_flight_frames": sum(s["free_flight_frames"] for s in systems.values()),
+        "residual_vs_stage_forces_max_bw": max((s["residual_vs_stage_forces_max_bw"] for s in systems.values()
+                                                if "residual_vs_stage_forces_max_bw" in s), default=None),
         "mass_kg": {n: r["mass_kg"] for n, r in report_chars.items()},
     }
     limits = {"penetration_max_mm": tol.penetration_mm, "stance_slide_max_mm": tol.stance_slide_mm,
