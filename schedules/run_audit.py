@@ -2,8 +2,8 @@
 
 The stage audit reads only the stage.  It needs 120 Hz samples (finite differences of a
 30 fps stage see UsdSkel's interpolation, not the motion), so the same scene is also
-exported at 120 Hz into the run folder (``stage_120hz.usdc``), with compose's contact and
-coupling forces as debug force prims (``/World/Debug``), and that stage is audited: its
+exported at 120 Hz into the run folder (``stage_120hz.usdc``), with compose's contact,
+coupling and shoe-spring forces as debug force prims (``/World/Debug``), and that stage is audited: its
 ``residual_vs_stage_forces`` is what compose's own forces leave unexplained at 120 Hz.  Characters that touch are audited as one
 system (``groups=auto``) and the contacts the scenario asks for — the hands of a coupling,
 the tackler on its target — are listed in the stage (``allowedContacts``) so overlaps there
@@ -38,10 +38,36 @@ def allowed_contacts(scene) -> list[str]:
     return sorted(set(out))
 
 
+def _interp_runs(times: np.ndarray, ht: np.ndarray, hf: np.ndarray) -> np.ndarray:
+    """Forces (T, 3) at ``times``: linear between consecutive solver times of one contact
+    run, zero elsewhere.  The solver reports a handle's force only at the collocation points
+    where it is in contact, so a gap longer than 2.5 × the usual spacing ends a run."""
+    o = np.argsort(ht, kind="stable")
+    ht, hf = ht[o], hf[o]
+    V = np.zeros((len(times), 3))
+    if len(ht) == 1:
+        V[np.abs(times - ht[0]) < 1e-9] = hf[0]
+        return V
+    gaps = np.diff(ht)
+    step = float(np.median(gaps))
+    breaks = np.nonzero(gaps > 2.5 * step + 1e-9)[0]
+    starts = np.r_[0, breaks + 1]
+    ends = np.r_[breaks, len(ht) - 1]
+    for a, b in zip(starts, ends):
+        inside = (times >= ht[a] - 1e-9) & (times <= ht[b] + 1e-9)
+        if b == a:
+            V[inside] = hf[a]
+            continue
+        for d in range(3):
+            V[inside, d] = np.interp(times[inside], ht[a:b + 1], hf[a:b + 1, d])
+    return V
+
+
 def force_arrows(scene, contact_forces: dict, fps: float) -> list:
     """compose's contact and coupling forces as debug force prims at every frame: each
-    handle's force (N, world) interpolated linearly between the solver's times (zero outside
-    them), applied at the handle.  The shoe springs are not among them."""
+    handle's force (N, world), linear between the solver's times within a contact run and
+    zero outside (:func:`_interp_runs`), applied at the handle; and each heel's shoe spring
+    (kind "shoe").  A style that changes over time is taken as the character's current one."""
     from scenegraph.kinematics import numeric_fk
     from scenegraph.usd_export import ForceArrow
     out = []
@@ -58,12 +84,23 @@ def force_arrows(scene, contact_forces: dict, fps: float) -> list:
             hf = np.asarray(hf, float).reshape(-1, 3)
             if len(ht) == 0:
                 continue
-            V = np.stack([np.interp(times, ht, hf[:, d], left=0.0, right=0.0) for d in range(3)], 1)
+            V = _interp_runs(times, ht, hf)
             h = c.character.handle(handle)
             bi = names.index(h.body)
             O = np.einsum("tij,j->ti", R[:, bi], np.asarray(h.point, float)) + p[:, bi]
             kind = "coupling" if handle.startswith("palm") else "contact"
             out.append(ForceArrow(f"{c.name}_{handle}", O, V, kind, 1e-3, float(times[0]), c.name))
+        # the shoe springs (dynamics.shoe_force, Eq. 9): vertical, from the heel's height z
+        # (world, as the dynamics take it), g(h̄ − z) k_shoe (h̄ − z) with g the smooth step
+        k_shoe, h_rest = float(c.style.k_shoe), float(c.style.h_rest)
+        for side in ("l", "r"):
+            h = c.character.handle(f"heel_{side}")
+            bi = names.index(h.body)
+            O = np.einsum("tij,j->ti", R[:, bi], np.asarray(h.point, float)) + p[:, bi]
+            d = h_rest - O[:, 2]
+            fz = (np.tanh(500.0 * d) + 1.0) / 2.0 * k_shoe * d
+            V = np.stack([np.zeros_like(fz), np.zeros_like(fz), fz], 1)
+            out.append(ForceArrow(f"{c.name}_shoe_{side}", O, V, "shoe", 1e-3, float(times[0]), c.name))
     return out
 
 

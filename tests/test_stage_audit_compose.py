@@ -181,3 +181,12 @@ def test_run_hook_audits_a_120hz_stage_with_compose_forces(tmp_path):
     assert arrow.GetAttribute("compose:character").Get() == c.name
     assert np.allclose(arrow.GetAttribute("compose:force").Get(12), (0, 0, 300.0))
     assert any("residual_vs_stage_forces_max_bw" in s for s in rep["systems"].values())
+
+
+def test_solver_forces_are_interpolated_within_contact_runs_only():
+    from schedules.run_audit import _interp_runs
+    t = np.arange(0, 1.0001, 0.05)
+    ht = np.array([0.0, 0.1, 0.2, 0.3, 0.7, 0.8, 0.9])  # two contact runs, a swing between
+    hf = np.stack([np.zeros(7), np.zeros(7), ht * 100], 1)
+    V = _interp_runs(t, ht, hf)
+    assert np.allclose(V[:, 2], np.where((t <= 0.3 + 1e-9) | ((t >= 0.7 - 1e-9) & (t <= 0.9 + 1e-9)), t * 100, 0.0))
