@@ -47,7 +47,8 @@ def _audit(args) -> int:
         raise InputError(f"--fps must be positive, got {args.fps}")
     settings = AuditSettings(groups=parse_groups(args.group), allowed_contacts=tuple(args.allow or ()))
     rep = audit_stage(args.stage, args.fps, settings)
-    report.write_text(json.dumps(rep, indent=1) + "\n", encoding="utf-8")
+    from .checkpoints import atomic_write_text
+    atomic_write_text(json.dumps(rep, indent=1) + "\n", report)
     for name, s in rep["systems"].items():
         print(f"  {name}: mass {s['mass_kg']:.2f} kg, {s['contact_frames']} contact / {s['free_flight_frames']} "
               f"flight frames, CoP outside ≤ {s['cop_outside_max_cm']:.3g} cm, friction use ≤ "
