@@ -55,7 +55,7 @@ import numpy as np
 
 from scenarios.errors import ComposeError, InputError
 
-from .body import N_DOF, Character, drawn_shapes, standing_pose
+from .body import N_DOF, Character, drawn_shapes, keel_points, standing_pose
 from .kinematics import numeric_fk
 
 __all__ = [
@@ -285,28 +285,22 @@ def ellipsoid_mesh(center, semi_axes, n_around: int = 16, n_rings: int = 10):
     return pts, nrm, counts, idx
 
 
-def keel_mesh(keel_center, semi_axes, n_around: int = 16, n_rings: int = 10):
+def keel_mesh(keel_center, semi_axes, n_around: int = 16, n_rings: int = 10, pitch: float = 0.0):
     """A keel solid (see :class:`~scenegraph.body.DrawnShape`): points (N,3), normals (N,3),
-    counts, indices.  ``keel_center`` is the keel's midpoint, ``semi_axes`` (a, b, c).  The
-    two ends (x = ∓a, on the keel) are single vertices, and every cross-section ring has a
-    vertex on the keel, so the keel is drawn exactly.  Faces wind outward."""
-    c0 = np.asarray(keel_center, dtype=float)
-    a, b, c = (float(x) for x in semi_axes)
+    counts, indices.  ``keel_center`` is the keel's midpoint, ``semi_axes`` (a, b, c),
+    ``pitch`` the turn of its frame about y.  The two ends (on the keel) are single vertices
+    and every cross-section ring has a vertex on the keel, so the keel is drawn exactly.
+    Faces wind outward; normals are the section ellipses' (a fair shading normal)."""
+    pts = keel_points(keel_center, semi_axes, pitch, n_around, n_rings)
+    a, b, c = (max(float(x), 1e-12) for x in semi_axes)
+    ca, sa = math.cos(pitch), math.sin(pitch)
+    R = np.array([[ca, 0.0, sa], [0.0, 1.0, 0.0], [-sa, 0.0, ca]])
+    L = (pts - np.asarray(keel_center, float)) @ R  # local coordinates
     n_len = max(2, int(n_rings))
-    pts = [c0 + [-a, 0.0, 0.0]]
-    nrm = [np.array([-1.0, 0.0, 0.0])]
-    for i in range(1, n_len):
-        u = -math.cos(math.pi * i / n_len)
-        s = math.sqrt(max(0.0, 1.0 - u * u))
-        for k in range(n_around):
-            ph = 2 * math.pi * k / n_around - math.pi / 2  # k = 0: the lowest point, on the keel
-            y, z = math.cos(ph), math.sin(ph)
-            pts.append(c0 + [a * u, b * s * y, c * s * (1.0 + z)])
-            # the gradient of (y/bs)² + ((z − cs)/cs)² − 1 ignoring the slow change of s: a fair normal
-            n = np.array([-u / max(a, 1e-12) * 0.5 * s, y / max(b, 1e-12), z / max(c, 1e-12)])
-            nrm.append(n / np.linalg.norm(n))
-    pts.append(c0 + [a, 0.0, 0.0])
-    nrm.append(np.array([1.0, 0.0, 0.0]))
+    sig = np.sqrt(np.clip(1.0 - (L[:, 0] / a) ** 2, 1e-12, None))
+    nrm = np.stack([-L[:, 0] / (a * a) * 0.5, L[:, 1] / (b * b * sig), (L[:, 2] - c * sig) / (c * c * sig)], 1)
+    nrm[0], nrm[-1] = (-1.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+    nrm = (nrm / np.linalg.norm(nrm, axis=1, keepdims=True)) @ R.T
     last = len(pts) - 1
     counts: list[int] = []
     idx: list[int] = []
@@ -314,17 +308,17 @@ def keel_mesh(keel_center, semi_axes, n_around: int = 16, n_rings: int = 10):
     def ring(i, k):
         return 1 + (i - 1) * n_around + (k % n_around)
 
-    for k in range(n_around):  # the rear tip
+    for k in range(n_around):  # the rear end
         counts.append(3)
         idx += [0, ring(1, k + 1), ring(1, k)]
     for i in range(1, n_len - 1):
         for k in range(n_around):
             counts.append(4)
             idx += [ring(i, k), ring(i, k + 1), ring(i + 1, k + 1), ring(i + 1, k)]
-    for k in range(n_around):  # the front tip
+    for k in range(n_around):  # the front end
         counts.append(3)
         idx += [last, ring(n_len - 1, k), ring(n_len - 1, k + 1)]
-    return np.array(pts), np.array(nrm), counts, idx
+    return pts, nrm, counts, idx
 
 
 def box_mesh(center, half_extents):
@@ -532,7 +526,7 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
 
     for bi, (b, shape) in enumerate(zip(ch.bodies, drawn_shapes(ch))):
         if shape.kind == "keel":
-            pts, nrm, counts, idx = keel_mesh(shape.center, shape.semi_axes, *segments)
+            pts, nrm, counts, idx = keel_mesh(shape.center, shape.semi_axes, *segments, pitch=shape.pitch)
         else:
             pts, nrm, counts, idx = ellipsoid_mesh(shape.center, shape.semi_axes, *segments)
         mesh, Rbb, pbb = skinned_mesh(f"{prep.prim}_{b.name}", bi, pts, nrm, counts, idx, prep.color)

