@@ -315,6 +315,7 @@ def test_overlap_between_characters_and_groups(tmp_path):
     assert set(grouped["systems"]) == {"a+b"} and grouped["systems"]["a+b"]["mass_kg"] == pytest.approx(16.0)
     allowed = audit_stage(path, settings=AuditSettings(allowed_contacts=("a/*~b/*",)))
     assert allowed["summary"]["interpenetration_max_cm"] == 0.0
+    assert allowed["pairs"]["a~b"]["asked_for_overlap_max_cm"] == pytest.approx(3.0, abs=1e-3)
 
 
 # --- the command -----------------------------------------------------------------------------

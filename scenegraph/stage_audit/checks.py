@@ -183,6 +183,7 @@ class CharacterPair:
     depth: np.ndarray
     near: np.ndarray
     where: tuple
+    depth_allowed: np.ndarray = None  # (T,) m, the same over the asked-for contacts only
 
 
 def _mesh_boxes(points: np.ndarray, vert_mesh: np.ndarray, nm: int) -> np.ndarray:
@@ -234,18 +235,18 @@ def overlaps(chars, tol: float, allowed: tuple[str, ...] = ()) -> list[Character
             # (T, MA, MB) boxes within tol
             sep = np.maximum(bA[:, :, None, 0, :] - bB[:, None, :, 1, :], bB[:, None, :, 0, :] - bA[:, :, None, 1, :])
             close = np.all(sep < tol, axis=-1)
-            depth = np.zeros(T)
+            depth, depth_ok = np.zeros(T), np.zeros(T)
             near = close.any(axis=(1, 2))
             where = [""] * T
             for t, ma, mb in zip(*np.nonzero(np.all(sep < 0, axis=-1))):
                 na, nb = A.meshes.names[ma], B.meshes.names[mb]
                 key1, key2 = f"{A.name}/{na}~{B.name}/{nb}", f"{B.name}/{nb}~{A.name}/{na}"
-                if any(fnmatch.fnmatchcase(key1, pat) or fnmatch.fnmatchcase(key2, pat) for pat in allowed):
-                    continue
                 pa = A.meshes.points[t, A.meshes.vert_mesh == ma]
                 pb = B.meshes.points[t, B.meshes.vert_mesh == mb]
                 d = overlap_depth(pa, pb)
-                if d > depth[t]:
+                if any(fnmatch.fnmatchcase(key1, pat) or fnmatch.fnmatchcase(key2, pat) for pat in allowed):
+                    depth_ok[t] = max(depth_ok[t], d)
+                elif d > depth[t]:
                     depth[t], where[t] = d, key1
-            out.append(CharacterPair(A.name, B.name, depth, near, tuple(where)))
+            out.append(CharacterPair(A.name, B.name, depth, near, tuple(where), depth_ok))
     return out

@@ -210,6 +210,7 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
         systems["+".join(g)] = sysrep
 
     pair_rep = {f"{p.a}~{p.b}": {"overlap_max_cm": _r(p.depth.max() * 100, 3),
+                                 "asked_for_overlap_max_cm": _r(p.depth_allowed.max() * 100, 3),
                                  "worst_time": _r(samples.times[int(np.argmax(p.depth))]),
                                  "worst_meshes": p.where[int(np.argmax(p.depth))] or None,
                                  "near_frames": int(p.near.sum())} for p in pairs}
