@@ -360,3 +360,10 @@ def test_cli_bad_input_exits_2_naming_the_problem(tumbling, tmp_path, args, need
     assert p.returncode == 2, (p.stdout, p.stderr)
     assert needle in p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_ground_height_follows_ramps_below_the_floor_too():
+    from scenegraph.stage_audit.reader import Ground
+    down = np.array([[[0, -1, 0.0], [2, -1, -0.2], [2, 1, -0.2]], [[0, -1, 0.0], [2, 1, -0.2], [0, 1, 0.0]]])
+    g = Ground(down)
+    assert np.allclose(g.height(np.array([1.0, 3.0, -1.0]), np.array([0.0, 0.0, 0.0])), [-0.1, 0.0, 0.0])

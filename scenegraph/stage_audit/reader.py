@@ -17,9 +17,9 @@ is listed in ``massless``.  Mass is spread uniformly through the mesh's volume.
 Asked-for contacts between characters (held hands, a tackle) may be listed in the layer's
 ``customLayerData["compose"]["allowedContacts"]`` as patterns 'charA/meshA~charB/meshB'.
 
-Ground: the plane z = 0 plus every mesh outside the characters whose prim has
-``compose:kind`` = "slope" or "ground" (or lies under ``/World/Ground``): the ground height
-under a point is the highest upward-facing triangle of those meshes above it, else 0.
+Ground: every mesh outside the characters whose prim has ``compose:kind`` = "slope" or
+"ground" (or lies under ``/World/Ground``) is a ramp: the ground height under a point is the
+highest upward-facing triangle of those meshes over it (below 0 on a downhill), else 0.
 """
 from __future__ import annotations
 
@@ -37,7 +37,8 @@ DEFAULT_DENSITY = 1000.0  # kg/m^3
 
 @dataclass(frozen=True)
 class Ground:
-    """Height field z = h(x, y) (m): z = 0 plus upward-facing triangles (K, 3, 3) of ramps."""
+    """Height field z = h(x, y) (m): over a ramp (upward-facing triangles (K, 3, 3)) its
+    highest face, which may be below 0 (a downhill); elsewhere the floor z = 0."""
 
     triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
 
@@ -45,7 +46,7 @@ class Ground:
         """Ground height (m) under the points (x, y) (any equal shapes)."""
         x = np.asarray(x, float)
         y = np.asarray(y, float)
-        h = np.zeros(np.broadcast(x, y).shape)
+        h = np.full(np.broadcast(x, y).shape, -np.inf)  # the highest ramp face over the point
         for a, b, c in self.triangles:
             d = (b[1] - c[1]) * (a[0] - c[0]) + (c[0] - b[0]) * (a[1] - c[1])
             if abs(d) < 1e-12:
@@ -56,7 +57,7 @@ class Ground:
             inside = (l1 >= -1e-9) & (l2 >= -1e-9) & (l3 >= -1e-9)
             z = l1 * a[2] + l2 * b[2] + l3 * c[2]
             h = np.where(inside, np.maximum(h, z), h)
-        return h
+        return np.where(np.isfinite(h), h, 0.0)  # off every ramp: the floor z = 0
 
     @property
     def flat(self) -> bool:
