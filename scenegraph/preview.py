@@ -125,16 +125,14 @@ def _drawn_ellipsoids(ch, pos: dict) -> list:
     what :func:`scene_from_stage` reads back from the meshes (keel solids for feet and toes,
     carried loads as boxes on their handles)."""
     from .body import drawn_shapes
-    from .usd_export import CARRIED_DENSITY
+    from .usd_export import carried_half_extents
     out = []
     for bi, d in enumerate(drawn_shapes(ch)):
         out.append((pos[bi], *d.bounds()))
     index = {b.name: i for i, b in enumerate(ch.bodies)}
     for handle, extra in ch.loads:
         h = ch.handle(handle)
-        shape = np.array([0.4, 1.33, 1.0])
-        half = 0.5 * shape * (max(extra, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
-        out.append((pos[index[h.body]], np.array(h.point, float), half))
+        out.append((pos[index[h.body]], np.array(h.point, float), carried_half_extents(extra)))
     return out
 
 

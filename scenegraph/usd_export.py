@@ -331,6 +331,13 @@ def box_mesh(center, half_extents):
 
 
 CARRIED_DENSITY = 300.0  # kg/m^3: the drawn size of a carried load (a packed suitcase)
+CARRIED_SHAPE = (1.33, 0.4, 1.0)  # a suitcase's proportions: long along x (forward), thin sideways
+
+
+def carried_half_extents(mass: float) -> np.ndarray:
+    """Half extents (m, body axes) of the box drawn for a carried load of ``mass`` kg."""
+    shape = np.array(CARRIED_SHAPE)
+    return 0.5 * shape * (max(mass, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
 
 
 def _to_vt(value: Any):
@@ -542,8 +549,7 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
     for n, (handle, extra) in enumerate(ch.loads):
         h = ch.handle(handle)
         bi = body_index[h.body]
-        shape = np.array([0.4, 1.33, 1.0])  # a suitcase's proportions (thin along x, the walking direction)
-        half = 0.5 * shape * (max(extra, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
+        half = carried_half_extents(extra)
         pts, nrm, counts, idx = box_mesh(h.point, half)
         name = f"{prep.prim}_carried_{n}"
         _check_name_bytes(name, f"character {prep.track.name!r}: carried object")

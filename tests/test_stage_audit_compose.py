@@ -192,3 +192,17 @@ def test_solver_forces_are_interpolated_within_contact_runs_only():
     hf = np.stack([np.zeros(7), np.zeros(7), ht * 100], 1)
     V = _interp_runs(t, ht, hf)
     assert np.allclose(V[:, 2], np.where((t <= 0.3 + 1e-9) | ((t >= 0.7 - 1e-9) & (t <= 0.9 + 1e-9)), t * 100, 0.0))
+
+
+def test_preview_draws_the_carried_suitcase_from_the_stage_as_from_the_tracks(tmp_path):
+    from scenegraph import preview
+    ch = make_character().with_extra_mass("palm_r", 3.0)
+    tracks = [CharacterTrack("walker", ch, np.tile(standing_pose(ch), (3, 1)))]
+    path = export_usd(tmp_path / "s.usda", tracks, 30.0)
+    es = sorted((j, tuple(np.round(c, 5)), tuple(np.round(s, 5)))
+                for j, c, s in preview.scene_from_stage(path).characters[0].ellipsoids)
+    et = sorted((j, tuple(np.round(c, 5)), tuple(np.round(s, 5)))
+                for j, c, s in preview.scene_from_tracks(tracks, 30.0).characters[0].ellipsoids)
+    assert len(es) == len(et) == 19
+    for (j1, c1, s1), (j2, c2, s2) in zip(es, et):
+        assert j1 == j2 and np.allclose(c1, c2, atol=1e-4) and np.allclose(s1, s2, atol=1e-4)
