@@ -108,6 +108,9 @@ class Character:
     bodies: tuple[Body, ...]
     handles: tuple[Handle, ...]
     joint_parent: tuple[tuple[str, str | None], ...] = field(default=())
+    # Point masses added with with_extra_mass (handle, kg), in order: the stage draws them as
+    # carried objects and the bodies as they were before (not part of the fingerprint).
+    loads: tuple[tuple[str, float], ...] = field(default=())
 
     @property
     def dof_names(self) -> list[str]:
@@ -158,7 +161,7 @@ class Character:
                 c = tuple((np.array(b.center) * b.mass + np.array(h.point) * mass) / m)
                 b = replace(b, mass=m, center=c)  # inertia stays the ellipsoid's (point mass adds ~ m d², ignored)
             bodies.append(b)
-        return replace(self, bodies=tuple(bodies))
+        return replace(self, bodies=tuple(bodies), loads=self.loads + ((handle, float(mass)),))
 
     def with_limits(self, name: str, lower: float, upper: float) -> "Character":
         i = self.dof_index(name)
@@ -341,6 +344,162 @@ def make_character(preset: str = "adult_male", height: float | None = None, mass
     return Character(preset, H, M, tuple(dofs), tuple(bodies), tuple(handles))
 
 
+# --- what is drawn ------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class DrawnShape:
+    """The visible solid of one body, in the body's frame (m).
+
+    ``kind`` "ellipsoid": centre ``center``, semi-axes ``semi_axes``.
+
+    ``kind`` "keel" (feet and toes): a spindle lying on a straight keel.  ``center`` is the
+    keel's midpoint, the keel runs along x from −a to +a at that height, and the cross-
+    section at x = a·u is an ellipse with semi-axes (b·s, c·s), s = sqrt(1 − u²), whose
+    lowest point is on the keel (``semi_axes`` = (a, b, c)).  Its ends (the keel's ends) are
+    the contact handles; rolled by ψ about the keel it dips at most b² ψ² / (2c) below it.
+    Volume 4/3 π a b c; centre of mass 9π/32 · c above the keel.
+
+    ``mass`` (kg) is the body's own (loads removed) and ``com`` its centre of mass."""
+
+    body: str
+    kind: str
+    center: tuple[float, float, float]
+    semi_axes: tuple[float, float, float]
+    mass: float
+    com: tuple[float, float, float]
+    pitch: float = 0.0  # rad: a keel's local frame is the body's turned by this about y (rear end up)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """3×3: the keel's local axes (x along the keel, rear to front; z up from it) in the body frame."""
+        ca, sa = math.cos(self.pitch), math.sin(self.pitch)
+        return np.array([[ca, 0.0, sa], [0.0, 1.0, 0.0], [-sa, 0.0, ca]])
+
+    def bounds(self, segments: tuple[int, int] = (16, 10)) -> tuple[np.ndarray, np.ndarray]:
+        """(centre, half extents) of the axis-aligned box of the drawn mesh's vertices in the
+        body frame (m), for the mesh the stage writes with ``segments``."""
+        c, s = np.array(self.center, float), np.array(self.semi_axes, float)
+        if self.kind == "keel":
+            P = keel_points(self.center, self.semi_axes, self.pitch, *segments)
+            lo, hi = P.min(0), P.max(0)
+            return (lo + hi) / 2, (hi - lo) / 2
+        return c, s
+
+    @property
+    def volume(self) -> float:
+        a, b, c = self.semi_axes
+        return 4.0 / 3.0 * math.pi * a * b * c
+
+    @property
+    def inertia(self) -> np.ndarray:
+        """3×3 inertia (kg·m²) of the drawn solid at uniform density about its centre of mass."""
+        a, b, c = self.semi_axes
+        m = self.mass
+        if self.kind == "ellipsoid":
+            return m / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+        u, w = np.polynomial.legendre.leggauss(64)  # slices along the keel
+        s = np.sqrt(1.0 - u * u)
+        dm = w * s * s / np.sum(w * s * s) * m  # slice mass ∝ its area π b c s²
+        zc = c * s - 9.0 * math.pi / 32.0 * c  # slice centre above the solid's centre of mass
+        x = a * u
+        yy, zz = dm * (b * s) ** 2 / 4.0, dm * (c * s) ** 2 / 4.0 + dm * zc * zc
+        xx = dm * x * x
+        I = np.diag([np.sum(yy + zz), np.sum(xx + zz), np.sum(xx + yy)])
+        R = self.rotation
+        return R @ I @ R.T
+
+
+def keel_points(center, semi_axes, pitch: float = 0.0, n_around: int = 16, n_rings: int = 10) -> np.ndarray:
+    """Vertices (N, 3) of a keel solid's mesh in the body frame: the rear end, ``n_rings − 1``
+    rings of ``n_around`` points (the first of each on the keel), the front end.  The keel's
+    local frame is turned by ``pitch`` about y (see :class:`DrawnShape`)."""
+    a, b, c = (float(x) for x in semi_axes)
+    n_len = max(2, int(n_rings))
+    pts = [(-a, 0.0, 0.0)]
+    for i in range(1, n_len):
+        u = -math.cos(math.pi * i / n_len)
+        s = math.sqrt(max(0.0, 1.0 - u * u))
+        for k in range(n_around):
+            ph = 2 * math.pi * k / n_around - math.pi / 2  # k = 0: the lowest point, on the keel
+            pts.append((a * u, b * s * math.cos(ph), c * s * (1.0 + math.sin(ph))))
+    pts.append((a, 0.0, 0.0))
+    ca, sa = math.cos(pitch), math.sin(pitch)
+    R = np.array([[ca, 0.0, sa], [0.0, 1.0, 0.0], [-sa, 0.0, ca]])
+    return np.asarray(center, float) + np.array(pts) @ R.T
+
+
+TOES_KEEL_PITCH = math.radians(15.0)  # the toes' keel rises 15° from the tip toward the toe joint
+
+
+def _own_mass_and_center(ch: Character, b: Body) -> tuple[float, np.ndarray]:
+    """A body's mass and centre before with_extra_mass added its loads."""
+    m, mc = b.mass, np.array(b.center, float) * b.mass
+    for handle, extra in ch.loads:
+        h = ch.handle(handle)
+        if h.body == b.name:
+            m -= extra
+            mc -= np.array(h.point, float) * extra
+    return m, mc / m
+
+
+KEEL_COM = 9.0 * math.pi / 32.0  # a keel solid's centre of mass above its keel, per unit c
+
+
+def drawn_shapes(ch: Character) -> tuple[DrawnShape, ...]:
+    """The solid drawn for each body (in ``ch.bodies`` order): the dynamics' ellipsoid, except
+    each foot and each toes segment, drawn as a keel solid (see :class:`DrawnShape`) whose
+    keel joins its contact handles — heel to ball on the foot — or ends at one — the toes'
+    keel ends at the toe tip and rises 15° toward the toe joint — so the visible feet rest on
+    the floor exactly when the handles do.  Each keel keeps the body's centre of mass.  The
+    foot keeps its volume at the model's density (1000 kg/m³); the toes are drawn as wide as
+    the foot, so their smaller volume holds their mass at a higher density (the stage states
+    every mass with UsdPhysics).  Inertias: the drawn
+    solids' differ from the ellipsoids' the dynamics use (docs/usd-output.md)."""
+    out = []
+    foot_half_width: dict[str, float] = {}
+    for b in ch.bodies:
+        m, c = _own_mass_and_center(ch, b)
+        kind, center, semi = "ellipsoid", tuple(float(x) for x in c), b.semi_axes
+        side = b.name.rsplit("_", 1)[-1]
+        ends = None
+        if b.name.startswith("foot_"):
+            ends = (ch.handle(f"heel_{side}").point, ch.handle(f"ball_{side}").point)
+        elif b.name.startswith("toes_"):
+            tip = ch.handle(f"toe_{side}").point
+            ends = ((0.0, 0.0, tip[2]), tip)
+        pitch = 0.0
+        if ends is not None and b.name.startswith("foot_"):
+            (x0, _, z0), (x1, _, z1) = ends
+            a = (x1 - x0) / 2.0
+            hc = (c[2] - z0) / KEEL_COM
+            if not (a > 0 and hc > 0 and abs(z1 - z0) < 1e-12 and abs(c[0] - (x0 + x1) / 2.0) < 1e-9
+                    and abs(c[1]) < 1e-9):
+                raise InputError(f"body {b.name!r}: its centre of mass is not above the middle of its contact handles")
+            w = m / (DENSITY * 4.0 / 3.0 * math.pi * a * hc)
+            foot_half_width[side] = w
+            kind, center, semi = "keel", ((x0 + x1) / 2.0, 0.0, float(z0)), (float(a), float(w), float(hc))
+        elif ends is not None:
+            # The toes' keel ends at the toe tip and rises 15° toward the joint, so its rear end
+            # stays near the joint axis: a keel flat along the sole would start 0.4 ankle
+            # heights below the joint and, the foot pitched heel-up with the toes flat, swing
+            # below the ball handle (3 mm measured in the walk).  Tip E, angle α, centre of
+            # mass C: C − E = −a d + k n with d = (cos α, 0, −sin α), n = (sin α, 0, cos α).
+            tip = np.array(ends[1], float)
+            al = TOES_KEEL_PITCH
+            dx, dz = c[0] - tip[0], c[2] - tip[2]
+            a = -dx * math.cos(al) + dz * math.sin(al)
+            k = dx * math.sin(al) + dz * math.cos(al)
+            if not (a > 0 and k > 0 and abs(c[1]) < 1e-9):
+                raise InputError(f"body {b.name!r}: cannot draw a keel from its toe handle through its centre of mass")
+            d = np.array([math.cos(al), 0.0, -math.sin(al)])
+            mid = tip - a * d
+            w = foot_half_width.get(side, b.semi_axes[1])
+            kind, center, semi, pitch = "keel", tuple(float(x) for x in mid), (float(a), float(w), float(k / KEEL_COM)), al
+        out.append(DrawnShape(b.name, kind, center, tuple(float(x) for x in semi), float(m),
+                              tuple(float(x) for x in c), float(pitch)))
+    return tuple(out)
+
+
 def standing_pose(ch: Character) -> np.ndarray:
     """q of the character standing at the origin with soles on the ground (m, rad)."""
     q = np.zeros(N_DOF)
@@ -369,4 +528,4 @@ DOF_NAMES: tuple[str, ...] = (("root_tx", "root_ty", "root_tz", "root_yaw", "roo
                               + tuple(f"{d}_{side}" for side in ("l", "r") for d in _SIDE_DOFS))
 JOINT_DOF_NAMES: tuple[str, ...] = DOF_NAMES[N_ROOT:]
 assert len(DOF_NAMES) == N_DOF, len(DOF_NAMES)
-__all__ += ["standing_pose", "default_character"]
+__all__ += ["standing_pose", "default_character", "DrawnShape", "drawn_shapes", "keel_points"]

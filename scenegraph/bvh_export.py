@@ -34,7 +34,7 @@ import numpy as np
 from scenarios.atomic import atomic_write
 from scenarios.errors import InputError
 
-from .body import N_DOF, Character
+from .body import N_DOF, Character, drawn_shapes
 from .kinematics import numeric_fk
 
 __all__ = ["BvhSkeleton", "export_bvh", "bvh_text", "skeleton_of", "euler_zyx", "AXES", "UNITS"]
@@ -73,11 +73,11 @@ def skeleton_of(ch: Character) -> tuple[BvhSkeleton, list[int]]:
             pb = order[parents[j]]
             offsets[j] = R0[pb].T @ (p0[bi] - p0[pb])
     ends = {}
+    drawn = drawn_shapes(ch)
     has_child = set(parents)
     for j, bi in enumerate(order):
         if j not in has_child:
-            b = ch.bodies[bi]
-            ends[j] = end_site_of(b.center, b.semi_axes)
+            ends[j] = end_site_of(*drawn[bi].bounds())  # the drawn solid (a keel solid for the toes)
     return BvhSkeleton(tuple(names), tuple(parents), offsets, ends), order
 
 

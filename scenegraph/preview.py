@@ -69,6 +69,7 @@ class PreviewScene:
     times: np.ndarray  # (T,) s
     characters: list[PreviewCharacter]
     markers: list[PreviewMarker] = field(default_factory=list)
+    ramps: list[np.ndarray] = field(default_factory=list)  # upward faces (k, 3) of ramp meshes, world m
 
 
 @dataclass(frozen=True)
@@ -118,6 +119,22 @@ def have_ffmpeg() -> bool:
 
 # --- building scenes ----------------------------------------------------------------------------
 
+def _drawn_ellipsoids(ch, pos: dict) -> list:
+    """(joint, centre, semi-axes) of the box around each solid the stage draws (body frame, m):
+    what :func:`scene_from_stage` reads back from the meshes (keel solids for feet and toes,
+    carried loads as boxes on their handles)."""
+    from .body import drawn_shapes
+    from .usd_export import carried_half_extents
+    out = []
+    for bi, d in enumerate(drawn_shapes(ch)):
+        out.append((pos[bi], *d.bounds()))
+    index = {b.name: i for i, b in enumerate(ch.bodies)}
+    for handle, extra in ch.loads:
+        h = ch.handle(handle)
+        out.append((pos[index[h.body]], np.array(h.point, float), carried_half_extents(extra)))
+    return out
+
+
 def scene_from_tracks(tracks, fps: float, markers=()) -> PreviewScene:
     """A preview scene from :class:`~scenegraph.usd_export.CharacterTrack` s (uses our FK)."""
     from .kinematics import numeric_fk
@@ -136,7 +153,7 @@ def scene_from_tracks(tracks, fps: float, markers=()) -> PreviewScene:
         W[..., :3, :3], W[..., :3, 3], W[..., 3, 3] = R, p, 1.0
         W = W[:, order]
         pos = {bi: j for j, bi in enumerate(order)}
-        ells = [(pos[bi], np.array(b.center, float), np.array(b.semi_axes, float)) for bi, b in enumerate(tr.character.bodies)]
+        ells = _drawn_ellipsoids(tr.character, pos)
         color = tuple(tr.color) if tr.color is not None else _CHARACTER_COLORS[n % len(_CHARACTER_COLORS)]
         chars.append(PreviewCharacter(tr.name, color, W, ells, [p.rsplit("/", 1)[-1] for p in paths]))
     mk = [PreviewMarker(m.kind, np.asarray(m.position, float), float(m.radius),
@@ -224,11 +241,14 @@ def scene_from_stage(path, codes: Sequence[float] | None = None, *, with_local: 
                                           [j.rsplit("/", 1)[-1] for j in joints], parents, L))
     if not chars:
         raise InputError(f"{path} has no UsdSkel character (no SkelRoot with a bound Skeleton)")
-    markers = []
+    markers, ramps = [], []
     for prim in stage.Traverse():
         if not prim.HasAttribute("compose:kind") or not prim.IsA(UsdGeom.Gprim) or prim.IsA(UsdGeom.BasisCurves):
             continue
         kind = str(prim.GetAttribute("compose:kind").Get())
+        if kind in ("slope", "ground") and prim.IsA(UsdGeom.Mesh):  # a ramp: draw its top at its height
+            ramps += _upward_faces(prim)
+            continue
         M = _np_matrices([UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default())])[0]
         pos = M[:3, 3].copy()
         radius = float(prim.GetAttribute("radius").Get() or 0.05)
@@ -237,7 +257,25 @@ def scene_from_stage(path, codes: Sequence[float] | None = None, *, with_local: 
         a, b = prim.GetAttribute("compose:startTime"), prim.GetAttribute("compose:endTime")
         interval = (float(a.Get()), float(b.Get())) if a and b and a.HasValue() and b.HasValue() else None
         markers.append(PreviewMarker(kind, pos, radius, interval, prim.GetName()))
-    return PreviewScene(float(tcps), codes / float(tcps), chars, markers)
+    return PreviewScene(float(tcps), codes / float(tcps), chars, markers, ramps)
+
+
+def _upward_faces(prim) -> list[np.ndarray]:
+    """The faces of a mesh prim whose normal points up (world, m): a ramp's walking surface."""
+    from pxr import Usd, UsdGeom
+    mesh = UsdGeom.Mesh(prim)
+    M = _np_matrices([UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default())])[0]
+    P = np.asarray(mesh.GetPointsAttr().Get(), float)
+    P = P @ M[:3, :3].T + M[:3, 3]
+    out, o = [], 0
+    idx = list(mesh.GetFaceVertexIndicesAttr().Get())
+    for n in mesh.GetFaceVertexCountsAttr().Get():
+        f = P[idx[o:o + n]]
+        o += n
+        nrm = np.cross(f[1] - f[0], f[2] - f[0])
+        if np.linalg.norm(nrm) > 0 and nrm[2] / np.linalg.norm(nrm) > 0.3:
+            out.append(f)
+    return out
 
 
 # --- drawing -------------------------------------------------------------------------------------
@@ -293,6 +331,8 @@ def _scene_bounds(scene: PreviewScene, cam: ViewCamera, ks) -> tuple[np.ndarray,
     for m in scene.markers:
         pts.append(P @ m.position + m.radius)
         pts.append(P @ m.position - m.radius)
+    for face in scene.ramps:
+        pts.extend(face @ P.T)
     pts = np.array(pts)
     lo, hi = pts.min(0), pts.max(0)
     pad = 0.08 * max(hi - lo) + 0.05
@@ -323,6 +363,10 @@ def _draw_frame(ax, scene: PreviewScene, k: int, cam: ViewCamera, ks, limits, ti
     if cam.elevation > 0:
         ax.add_patch(Polygon(np.array(corners), closed=True, facecolor=(0.93, 0.93, 0.9), edgecolor="none", zorder=0))
     ax.add_collection(LineCollection(lines, colors=[(0.75, 0.75, 0.72)], linewidths=0.5, zorder=1))
+    P = cam.basis()[:2]
+    for face in scene.ramps:  # ramps at their height, over the grid and under the bodies
+        ax.add_patch(Polygon(face @ P.T, closed=True, facecolor=(0.80, 0.74, 0.62), edgecolor=(0.55, 0.5, 0.42),
+                             linewidth=0.6, alpha=0.9, zorder=1.5))
     for z, (depth, kind, c2, w, h, ang, color, alpha) in enumerate(_frame_items(scene, k, cam)):
         edge = tuple(0.55 * x for x in color)
         ax.add_patch(Ellipse(tuple(c2), w, h, angle=ang, facecolor=color, edgecolor=edge, linewidth=0.6,

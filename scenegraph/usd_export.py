@@ -55,7 +55,7 @@ from scenarios.atomic import atomic_path
 from scenarios.errors import ComposeError, InputError
 from scenarios.versions import compose_version
 
-from .body import N_DOF, Character, standing_pose
+from .body import N_DOF, Character, drawn_shapes, keel_points, standing_pose
 from .kinematics import numeric_fk
 from .rotations import quat_from_matrix
 
@@ -123,6 +123,7 @@ class ForceArrow:
     kind: str = "force"
     scale: float = 1e-3  # m per N
     start_time: float = 0.0
+    character: str | None = None  # who feels it (written as compose:character; compose audit reads it)
 
 
 # --- helpers -----------------------------------------------------------------------------------
@@ -251,6 +252,61 @@ def ellipsoid_mesh(center, semi_axes, n_around: int = 16, n_rings: int = 10):
     return pts, nrm, counts, idx
 
 
+def keel_mesh(keel_center, semi_axes, n_around: int = 16, n_rings: int = 10, pitch: float = 0.0):
+    """A keel solid (see :class:`~scenegraph.body.DrawnShape`): points (N,3), normals (N,3),
+    counts, indices.  ``keel_center`` is the keel's midpoint, ``semi_axes`` (a, b, c),
+    ``pitch`` the turn of its frame about y.  The two ends (on the keel) are single vertices
+    and every cross-section ring has a vertex on the keel, so the keel is drawn exactly.
+    Faces wind outward; normals are the section ellipses' (a fair shading normal)."""
+    pts = keel_points(keel_center, semi_axes, pitch, n_around, n_rings)
+    a, b, c = (max(float(x), 1e-12) for x in semi_axes)
+    ca, sa = math.cos(pitch), math.sin(pitch)
+    R = np.array([[ca, 0.0, sa], [0.0, 1.0, 0.0], [-sa, 0.0, ca]])
+    L = (pts - np.asarray(keel_center, float)) @ R  # local coordinates
+    n_len = max(2, int(n_rings))
+    sig = np.sqrt(np.clip(1.0 - (L[:, 0] / a) ** 2, 1e-12, None))
+    nrm = np.stack([-L[:, 0] / (a * a) * 0.5, L[:, 1] / (b * b * sig), (L[:, 2] - c * sig) / (c * c * sig)], 1)
+    nrm[0], nrm[-1] = (-1.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+    nrm = (nrm / np.linalg.norm(nrm, axis=1, keepdims=True)) @ R.T
+    last = len(pts) - 1
+    counts: list[int] = []
+    idx: list[int] = []
+
+    def ring(i, k):
+        return 1 + (i - 1) * n_around + (k % n_around)
+
+    for k in range(n_around):  # the rear end
+        counts.append(3)
+        idx += [0, ring(1, k + 1), ring(1, k)]
+    for i in range(1, n_len - 1):
+        for k in range(n_around):
+            counts.append(4)
+            idx += [ring(i, k), ring(i, k + 1), ring(i + 1, k + 1), ring(i + 1, k)]
+    for k in range(n_around):  # the front end
+        counts.append(3)
+        idx += [last, ring(n_len - 1, k), ring(n_len - 1, k + 1)]
+    return pts, nrm, counts, idx
+
+
+def box_mesh(center, half_extents):
+    """A closed box: points (8,3), normals (8,3) (corner directions), counts, indices."""
+    c = np.asarray(center, float)
+    h = np.asarray(half_extents, float)
+    U = np.array([[x, y, z] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)], float)
+    faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+    return c + U * h, U / np.sqrt(3.0), [4] * 6, [i for f in faces for i in f]
+
+
+CARRIED_DENSITY = 300.0  # kg/m^3: the drawn size of a carried load (a packed suitcase)
+CARRIED_SHAPE = (1.33, 0.4, 1.0)  # a suitcase's proportions: long along x (forward), thin sideways
+
+
+def carried_half_extents(mass: float) -> np.ndarray:
+    """Half extents (m, body axes) of the box drawn for a carried load of ``mass`` kg."""
+    shape = np.array(CARRIED_SHAPE)
+    return 0.5 * shape * (max(mass, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
+
+
 def _to_vt(value: Any):
     """Convert plain Python metadata into something a layer's customLayerData can hold."""
     from pxr import Vt
@@ -356,7 +412,7 @@ def _bind_material(prim, mat) -> None:
 
 
 def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, int]) -> None:
-    from pxr import Gf, Sdf, UsdGeom, UsdSkel, Vt
+    from pxr import Gf, Sdf, UsdGeom, UsdPhysics, UsdSkel, Vt
     ch = prep.track.character
     root_path = f"/World/{prep.prim}"
     skel_root = UsdSkel.Root.Define(stage, root_path)
@@ -380,7 +436,11 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
     for attr, val in (("compose:character", prep.track.name), ("compose:preset", ch.preset)):
         skel.GetPrim().CreateAttribute(attr, Sdf.ValueTypeNames.String, custom=True).Set(val)
     skel.GetPrim().CreateAttribute("compose:height", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.height))
-    skel.GetPrim().CreateAttribute("compose:mass", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.mass))
+    # compose:mass is everything the dynamics move (the body and its carried loads, kg)
+    skel.GetPrim().CreateAttribute("compose:mass", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.total_mass))
+    skel.GetPrim().CreateAttribute("compose:bodyMass", Sdf.ValueTypeNames.Double, custom=True).Set(float(ch.mass))
+    skel.GetPrim().CreateAttribute("compose:carriedMass", Sdf.ValueTypeNames.Double, custom=True).Set(
+        float(sum(m for _, m in ch.loads)))
 
     # Animation: one sample per frame for translations, rotations and scales.
     anim.CreateJointsAttr(joint_tokens)
@@ -400,16 +460,17 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         ext = Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))])
         ext_attr.Set(ext, code)
 
-    # Meshes: one ellipsoid per body, in the skeleton's space at the bind pose.
+    # Meshes: one solid per body (body.drawn_shapes: ellipsoids, keel solids for feet and toes), in
+    # the skeleton's space at the bind pose, with the dynamics' mass properties (UsdPhysics).
     mat = _define_material(stage, f"{looks}/{prep.prim}_Material", prep.color)
     joint_of_body = {bi: j for j, bi in enumerate(order)}
     ident = Gf.Matrix4d(1.0)
-    for bi, b in enumerate(ch.bodies):
-        pts, nrm, counts, idx = ellipsoid_mesh(b.center, b.semi_axes, *segments)
+
+    def skinned_mesh(name, bi, pts, nrm, counts, idx, color):
         Rbb, pbb = Rb[0, bi], pb[0, bi]
         pts_w = pts @ Rbb.T + pbb
         nrm_w = nrm @ Rbb.T
-        mesh = UsdGeom.Mesh.Define(stage, f"{root_path}/{prep.prim}_{b.name}")
+        mesh = UsdGeom.Mesh.Define(stage, f"{root_path}/{name}")
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts_w.astype(np.float32))))
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray(counts))
         mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(idx))
@@ -417,14 +478,54 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
         mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, pts_w.min(0))), Gf.Vec3f(*map(float, pts_w.max(0)))]))
-        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*prep.color)]))
+        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*color)]))
         binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
         binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
         binding.CreateJointIndicesPrimvar(constant=True, elementSize=1).Set(Vt.IntArray([joint_of_body[bi]]))
         binding.CreateJointWeightsPrimvar(constant=True, elementSize=1).Set(Vt.FloatArray([1.0]))
         binding.CreateGeomBindTransformAttr(ident)
-        mesh.GetPrim().CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(b.name)
-        _bind_material(mesh.GetPrim(), mat)
+        return mesh, Rbb, pbb
+
+    def mass_api(prim, mass, com_body, inertia_body, Rbb, pbb):
+        """UsdPhysics.MassAPI in the mesh's space (the skeleton's at the bind pose)."""
+        api = UsdPhysics.MassAPI.Apply(prim)
+        api.CreateMassAttr(float(mass))
+        api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, Rbb @ np.asarray(com_body, float) + pbb)))
+        w, V = np.linalg.eigh(Rbb @ np.asarray(inertia_body, float) @ Rbb.T)
+        if np.linalg.det(V) < 0:
+            V[:, 0] *= -1
+        api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, w)))
+        qa = quat_from_matrix(V)
+        api.CreatePrincipalAxesAttr(Gf.Quatf(float(qa[0]), float(qa[1]), float(qa[2]), float(qa[3])))
+
+    for bi, (b, shape) in enumerate(zip(ch.bodies, drawn_shapes(ch))):
+        if shape.kind == "keel":
+            pts, nrm, counts, idx = keel_mesh(shape.center, shape.semi_axes, *segments, pitch=shape.pitch)
+        else:
+            pts, nrm, counts, idx = ellipsoid_mesh(shape.center, shape.semi_axes, *segments)
+        mesh, Rbb, pbb = skinned_mesh(f"{prep.prim}_{b.name}", bi, pts, nrm, counts, idx, prep.color)
+        prim = mesh.GetPrim()
+        prim.CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(b.name)
+        prim.CreateAttribute("compose:shape", Sdf.ValueTypeNames.String, custom=True).Set(shape.kind)
+        # the dynamics' own numbers: mass, centre, the ellipsoid's inertia (Body.inertia)
+        mass_api(prim, shape.mass, shape.com, b.inertia, Rbb, pbb)
+        _bind_material(prim, mat)
+    # Carried loads (with_extra_mass, e.g. a suitcase): a box centred on the handle that holds
+    # it, skinned to that handle's joint, with the load's mass (the dynamics: a point mass).
+    body_index = {b.name: i for i, b in enumerate(ch.bodies)}
+    for n, (handle, extra) in enumerate(ch.loads):
+        h = ch.handle(handle)
+        bi = body_index[h.body]
+        half = carried_half_extents(extra)
+        pts, nrm, counts, idx = box_mesh(h.point, half)
+        name = f"{prep.prim}_carried_{n}"
+        _check_name_bytes(name, f"character {prep.track.name!r}: carried object")
+        mesh, Rbb, pbb = skinned_mesh(name, bi, pts, nrm, counts, idx, (0.35, 0.25, 0.15))
+        prim = mesh.GetPrim()
+        prim.CreateAttribute("compose:carried", Sdf.ValueTypeNames.String, custom=True).Set(handle)
+        prim.CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(h.body)
+        mass_api(prim, extra, h.point, np.zeros((3, 3)), Rbb, pbb)
+        _bind_material(prim, mat)
 
 
 def _write_markers(stage, markers: Sequence[Marker], fps: float, t0: int, t1: int, looks: str) -> list[np.ndarray]:
@@ -557,6 +658,9 @@ def _write_forces(stage, forces: Sequence[ForceArrow], fps: float) -> None:
         prim = curves.GetPrim()
         prim.CreateAttribute("compose:kind", Sdf.ValueTypeNames.String, custom=True).Set(f.kind)
         prim.CreateAttribute("compose:scale", Sdf.ValueTypeNames.Double, custom=True).Set(float(f.scale))
+        if f.character is not None:
+            prim.CreateAttribute("compose:character", Sdf.ValueTypeNames.String, custom=True).Set(
+                character_prim_name(f.character))
         force_attr = prim.CreateAttribute("compose:force", Sdf.ValueTypeNames.Double3, custom=True)
         pa, ea = curves.CreatePointsAttr(), curves.CreateExtentAttr()
         for k in range(o.shape[0]):

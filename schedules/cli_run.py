@@ -108,6 +108,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
     from .compiler import compile_schedule
     from .checkpoints import RunLock, atomic_write_text
     from .executor import run_fingerprint, run_schedule
+    from .run_audit import allowed_contacts, audit_run_stage
 
     t0 = time.perf_counter()
     if jobs < 1:
@@ -161,8 +162,11 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
         energies = {c.name: float(audits[c.name]["energy"]) for c in final.characters}
         metadata = {"scenario": scn.name, "scenario_file": str(source),
                     "styles": {ref: where for ref, where in final.style_refs},
-                    "versions": _versions(), "energies": energies}
+                    "versions": _versions(), "energies": energies,
+                    "allowedContacts": allowed_contacts(final)}  # hook (issue #15): contacts asked for
         export_usd(out_path, tracks, fps, markers=markers, metadata=metadata, ground=final.ground)
+        stage_audit = audit_run_stage(final, out_path, fps, rdir, metadata, log,  # hook (issue #15)
+                                      result.contact_forces)
 
         rep = {
             "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),
@@ -175,6 +179,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
             "goals": goals, "couplings": couplings,
             **goal_verdict(goals, couplings),
             "all_audits_pass": all(a["passes"] for a in audits.values()),
+            "stage_audit": stage_audit,  # compose audit of the written stage at 120 Hz (not in "passes")
             "total_seconds": round(time.perf_counter() - t0, 3), "solve_seconds": round(result.seconds, 3),
             "versions": _versions(),
         }

@@ -17,7 +17,10 @@ rules:
 7. the file and version helpers ``scenarios/atomic.py`` and ``scenarios/versions.py`` import
    nothing of the project but ``scenarios.errors``, so every layer can use them;
 8. goal and coupling records (``scenegraph/goals``) and the measures they use
-   (``scenegraph/measure.py``) never import the Scene (``scenegraph.scene`` builds them).
+   (``scenegraph/measure.py``) never import the Scene (``scenegraph.scene`` builds them);
+9. the stage auditor (``scenegraph/stage_audit/``) reads the stage only: it imports no
+   other ``scenegraph`` module (not the transcription, the residual kernels, the dynamics
+   or the body model) and no CasADi — it is the independent check of them.
 """
 from __future__ import annotations
 
@@ -188,6 +191,15 @@ def test_audit_and_residual_never_see_the_transcription():
 def test_goal_records_never_import_the_scene():
     bad = [f"{m} -> {t}" for m in _modules() if m == "scenegraph.measure" or m.startswith("scenegraph.goals")
            for t in sorted(_imports(m)[0]) if t == "scenegraph.scene"]
+    assert bad == []
+
+
+def test_stage_auditor_reads_the_stage_only():
+    mods = [m for m in _modules() if m == "scenegraph.stage_audit" or m.startswith("scenegraph.stage_audit.")]
+    assert "scenegraph.stage_audit.reader" in mods
+    bad = [f"{m} -> {t}" for m in mods for t in sorted(_imports(m)[0])
+           if (t.startswith("scenegraph") and not t.startswith("scenegraph.stage_audit")) or t == "casadi"
+           or t.startswith("schedules")]
     assert bad == []
 
 

@@ -21,7 +21,7 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
 
 from scenarios.errors import ComposeError, InputError  # noqa: E402
-from scenegraph.body import make_character, standing_pose  # noqa: E402
+from scenegraph.body import drawn_shapes, make_character, standing_pose  # noqa: E402
 from scenegraph.kinematics import numeric_fk  # noqa: E402
 from scenegraph.rotations import quat_from_matrix  # noqa: E402
 from scenegraph import usd_export  # noqa: E402
@@ -221,6 +221,7 @@ def test_skinned_mesh_points_lie_on_our_ellipsoids(stage_path, tracks):
         R, p = numeric_fk(tr.character, tr.q)
         c0 = int(round(tr.start_time * FPS))
         bodies = {b.name: (i, b) for i, b in enumerate(tr.character.bodies)}
+        shapes = {d.body: d for d in drawn_shapes(tr.character)}
         targets = binding.GetSkinningTargets()
         assert len(targets) == 18
         for k in (0, tr.q.shape[0] // 2, tr.q.shape[0] - 1):
@@ -232,10 +233,25 @@ def test_skinned_mesh_points_lie_on_our_ellipsoids(stage_path, tracks):
                 pts = Vt.Vec3fArray(rest)
                 assert skq.ComputeSkinnedPoints(xforms, pts, c0 + k)
                 X = np.asarray(pts, dtype=float)
-                u = (X - p[k, bi]) @ R[k, bi] - np.array(b.center)  # in the body frame
-                s = np.array(b.semi_axes)
-                worst = max(worst, float(np.abs(np.linalg.norm(u / s, axis=1) - 1.0).max()))
-                reach.append(np.abs(u).max(axis=0) / s)
+                shape = shapes[b.name]  # the drawn solid: the body's ellipsoid, or a keel for feet and toes
+                u = ((X - p[k, bi]) @ R[k, bi] - np.array(shape.center)) @ shape.rotation  # the solid's frame
+                s = np.array(shape.semi_axes)
+                if shape.kind == "keel":  # sections: ellipses (b·σ, c·σ) standing on the keel, σ = sqrt(1 − (x/a)²)
+                    sig = np.sqrt(np.clip(1 - (u[:, 0] / s[0]) ** 2, 0, None))
+                    tip = sig < 0.05  # the two ends (float32 points: σ is not exactly 0 there)
+                    assert tip.sum() == 2 and np.allclose(u[tip][:, 1:], 0, atol=1e-6)
+                    r = np.hypot(u[~tip, 1] / (s[1] * sig[~tip]), (u[~tip, 2] - s[2] * sig[~tip]) / (s[2] * sig[~tip]))
+                    assert u[:, 2].min() > -1e-6
+                    u = u - [0.0, 0.0, s[2]]  # its own box: centred c above the keel, half extents (a, b, c)
+                    # float32 points: within 1 µm of the surface, relative to the section's size
+                    size = np.minimum(s[1], s[2]) * sig[~tip]
+                    assert float((np.abs(r - 1.0) * size).max()) < 1e-6
+                else:
+                    r = np.linalg.norm(u / s, axis=1)
+                    worst = max(worst, float(np.abs(r - 1.0).max()))
+                # float32 points: the thin toes keel (1 cm) reaches its box to 1e-4 of its size
+                reach.append(np.minimum(np.abs(u).max(axis=0) / s, 1.0 + (1e-5 if shape.kind == "ellipsoid" else 0.0)))
+                assert np.all(np.abs(u).max(axis=0) / s < 1.0 + 1e-4)
     assert worst < 1e-5, worst
     assert np.all(np.array(reach) > 0.95) and np.all(np.array(reach) < 1.0 + 1e-5)
 

@@ -1,0 +1,12 @@
+"""An independent physics audit of any UsdSkel stage (``compose audit``).
+
+It reads only the stage — joint transforms and skinned meshes through UsdSkel, mass from
+``UsdPhysics.MassAPI`` or the meshes' volumes — never compose's dynamics, transcription or
+residual kernels (tests/test_architecture.py enforces it): it is the check of them.
+See docs/audit.md for what is measured and the tolerances.
+"""
+from .reader import DEFAULT_DENSITY, read_stage
+from .verdict import SUMMARY_KEYS, AuditSettings, Tolerances, audit_samples, audit_stage
+
+__all__ = ["audit_stage", "audit_samples", "read_stage", "AuditSettings", "Tolerances", "SUMMARY_KEYS",
+           "DEFAULT_DENSITY"]
