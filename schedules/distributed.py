@@ -152,12 +152,12 @@ def connect(spec: str, jobs: int = 1) -> DaskScheduler:
                                silence_logs=40)
         return DaskScheduler(spec, jobs, Client(cluster), cluster)
     if "://" not in spec:
-        raise InputError(f"--scheduler {spec!r}: expected local, processes, sync or a Dask scheduler address "
+        raise InputError(f"{spec!r}: expected local, processes, sync or a Dask scheduler address "
                          "such as tcp://host:8786", Location(None, field="--scheduler"))
     try:
         client = Client(spec, timeout=f"{CONNECT_TIMEOUT_S}s")
     except (OSError, TimeoutError, ValueError) as exc:
-        raise InputError(f"--scheduler {spec}: cannot reach the Dask scheduler within {CONNECT_TIMEOUT_S:g} s "
+        raise InputError(f"{spec}: cannot reach the Dask scheduler within {CONNECT_TIMEOUT_S:g} s "
                          f"({type(exc).__name__}: {exc}); nothing was written. Start one with "
                          "`dask scheduler` (see docs/distributed.md) or use --scheduler local",
                          Location(None, field="--scheduler")) from None
