@@ -17,6 +17,7 @@ COMMAND_MODULES = (
     "schedules.cli_scenario",   # validate, schema, list
     "schedules.cli_learn",      # learn
     "schedules.cli_preview",    # preview, export
+    "schedules.cli_sweep",      # sweep
 )
 
 
