@@ -55,7 +55,7 @@ def test_crowd_is_twelve_characters_in_six_couples():
     ("y: [-1.0, 0.5, 2.0]", "y: [-1.0, 0.5]", 8, "repeat[0].for.y", "has 2 values but 'i' has 3"),
     ('"${1 + i / 2}"', '"${1 + i ** 2}"', 15, "repeat[0].goals[0].target[0]", "bad expression"),
     ('"${1 + i / 2}"', '"${1 + __import__}"', 15, "repeat[0].goals[0].target[0]", "unknown variable"),
-    ("    goals:", "    goal:", 14, "repeat[0].goal", "unknown field 'goal'"),
+    ("    goals:", "    goal:", 15, "repeat[0].goal", "unknown field 'goal'"),
     ("      i: [1, 2, 3]", "      i: []", 7, "repeat[0].for.i", "list of 1 to 100 values"),
     ("name: w${i}", "name: w${i", 10, "repeat[0].characters[0].name", "unterminated"),
 ])
