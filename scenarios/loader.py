@@ -129,5 +129,9 @@ def scenario_json_schema() -> dict:
     """The JSON Schema of scenario files (for editors)."""
     schema = Scenario.model_json_schema()
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-    schema.setdefault("properties", {})["repeat"] = REPEAT_JSON_SCHEMA
+    props = schema.setdefault("properties", {})
+    props["repeat"] = REPEAT_JSON_SCHEMA
+    # characters may be an empty list when repeat blocks add them (validated after expansion)
+    if isinstance(props.get("characters"), dict) and props["characters"].pop("minItems", None):
+        schema["anyOf"] = [{"required": ["repeat"]}, {"properties": {"characters": {"minItems": 1}}}]
     return schema

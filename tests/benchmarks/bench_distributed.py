@@ -125,7 +125,7 @@ def edited_crowd(work: Path) -> Path:
     from scenarios.bundled import find_scenario
 
     text = Path(find_scenario("crowd")).read_text()
-    new = text.replace("dx: [0.9, 1.0, 0.95, 0.9, 1.0, 0.95]", "dx: [0.9, 1.0, 1.05, 0.9, 1.0, 0.95]")
+    new = text.replace("dx: [1.1, 1.2, 1.15, 1.1, 1.2, 1.15]", "dx: [1.1, 1.2, 1.25, 1.1, 1.2, 1.15]")
     assert new != text, "crowd.yaml changed: update the edit in the benchmark"
     p = work / "crowd_edited.yaml"
     p.write_text(new)
