@@ -5,6 +5,7 @@ that every path computes the same numbers, not that they converge).
 """
 from __future__ import annotations
 
+import io
 import json
 
 import pytest
@@ -20,13 +21,13 @@ def _numbers(rep: dict) -> list:
             + [(n, g["measured"]) for n, g in sorted(rep["goals"].items())])
 
 
-def _run(tmp_path, tag, **kw):
+def _run(tmp_path, tag, log=None, **kw):
     out = tmp_path / f"{tag}.usda"
-    rep = run_scenario("walk", out=str(out), run_dir=str(tmp_path / f"run_{tag}"), **kw)
+    rep = run_scenario("walk", out=str(out), run_dir=str(tmp_path / f"run_{tag}"), log=log or io.StringIO(), **kw)
     return out.read_bytes(), _numbers(rep), rep
 
 
-def test_identical_results_across_schedulers(tmp_path, monkeypatch, capsys):
+def test_identical_results_across_schedulers(tmp_path, monkeypatch):
     monkeypatch.setenv("COMPOSE_MAX_ITER", "4")
     store = str(tmp_path / "store")
     plain_stage, plain, _ = _run(tmp_path, "plain")
@@ -37,11 +38,10 @@ def test_identical_results_across_schedulers(tmp_path, monkeypatch, capsys):
         assert rep["scheduler"] == kw["scheduler"]
         assert nums == plain, tag
         assert stage == plain_stage, tag
-    capsys.readouterr()
     # the same scene again on one worker: every step comes from the step store, same stage
-    stage, nums, _ = _run(tmp_path, "again", scheduler="local", jobs=1, store=store)
-    err = capsys.readouterr().err
-    assert "2 of 2 step(s) came from the step store" in err
+    log = io.StringIO()
+    stage, nums, _ = _run(tmp_path, "again", log=log, scheduler="local", jobs=1, store=store)
+    assert "2 of 2 step(s) came from the step store" in log.getvalue()
     assert nums == plain and stage == plain_stage
     # the run folder written by the Dask path resumes with the plain executor
     _, nums, rep = _run(tmp_path, "local2", resume=True)
