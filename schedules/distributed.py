@@ -240,7 +240,7 @@ def _run(scene, schedule, sched, run_dir, fingerprint, resume, fail_capped, stor
         counts["stored"] += bool(stored)
         rec = _record(index[s.id], s, d)
         elapsed = time.perf_counter() - t_start
-        eta = elapsed / max(1, counts["new"]) * (n - counts["done"]) / max(1, sched.workers)
+        eta = elapsed / max(1, counts["new"]) * (n - counts["done"])  # wall time per finished step so far
         print(f"[{index[s.id] + 1}/{n}] {s.id} (cycle {s.cycle}, {s.kind}): {rec.status}, "
               f"{rec.iterations} it, E={rec.energy:.4g}, {rec.seconds:.1f} s{stored}; "
               f"elapsed {_fmt_s(elapsed)}, ETA {_fmt_s(eta)}", file=log, flush=True)
