@@ -367,7 +367,8 @@ def _json_default(o):
 def _run(args) -> int:
     rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
                        run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped,
-                       scheduler=args.scheduler, store="" if args.no_store else args.store)
+                       scheduler=getattr(args, "scheduler", None),
+                       store="" if getattr(args, "no_store", False) else getattr(args, "store", None))
     # exit 0: every physics audit passes and every goal and coupling expected to hold holds
     # (walk_to, reach, footprints, couplings, the winners' tackle/avoid goals); in adversarial
     # scenes the goals of the side that does not plan last are expected to fail and do not decide it
