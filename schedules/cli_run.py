@@ -291,7 +291,8 @@ def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, re
 
         rep = {
             "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),
-            "jobs": jobs, "scheduler": sched.spec if sched is not None else None, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
+            "jobs": jobs, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
+            "scheduler": sched.spec if sched is not None else None,
             "steps": [r.to_dict() for r in result.records],
             "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
                                     "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps)}
