@@ -149,7 +149,7 @@ def connect(spec: str, jobs: int = 1) -> DaskScheduler:
 
         dask.config.set({"distributed.nanny.pre-spawn-environ": {}})
         cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=40)
+                               silence_logs=50)  # task errors arrive through the futures; the close-time heartbeat noise does not
         return DaskScheduler(spec, jobs, Client(cluster), cluster)
     if "://" not in spec:
         raise InputError(f"{spec!r}: expected local, processes, sync or a Dask scheduler address "
