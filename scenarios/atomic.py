@@ -29,7 +29,7 @@ from typing import Iterator
 
 from .errors import ComposeError, InputError
 
-__all__ = ["atomic_path", "atomic_write", "file_mode", "WriteError"]
+__all__ = ["atomic_path", "atomic_write", "atomic_dir", "append_log", "file_mode", "WriteError"]
 
 
 class WriteError(ComposeError, OSError):
@@ -115,3 +115,40 @@ def atomic_write(path: str | os.PathLike, data: bytes | str, *, encoding: str = 
         with open(tmp, "wb") as fh:
             fh.write(raw)
     return Path(path)
+
+
+@contextmanager
+def atomic_dir(path: str | os.PathLike) -> Iterator[Path | None]:
+    """Yield a temporary folder next to ``path`` for the caller to fill; when the block ends
+    normally the folder is renamed to ``path`` (one ``rename``, atomic on POSIX) unless
+    ``path`` exists by then (another writer was first: its folder is kept and this one is
+    dropped). On any failure the temporary folder is removed. The parent is created."""
+    import shutil
+
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name[:12]}.", dir=path.parent))
+    except OSError as exc:
+        raise WriteError(f"could not write {path}: {exc}") from exc
+    try:
+        yield tmp
+        if not path.exists():
+            try:
+                os.rename(tmp, path)
+            except OSError:  # a concurrent writer renamed its copy first
+                pass
+            else:
+                _fsync_dir(path.parent)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def append_log(path: str | os.PathLike):
+    """Open a log file for appending (UTF-8, line-buffered). A log is a stream a reader may
+    follow while it grows, so it is the one kind of file written in place, never atomically."""
+    try:
+        return open(path, "a", encoding="utf-8", buffering=1)
+    except OSError as exc:
+        raise WriteError(f"could not write {path}: {exc}") from exc

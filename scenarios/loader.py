@@ -15,6 +15,7 @@ from pydantic import ValidationError
 
 from .bundled import bundled_styles, find_scenario
 from .errors import InputError, Location
+from .repeat import REPEAT_JSON_SCHEMA, expand_repeats
 from .schema import FieldProblem, Scenario
 from .yamlio import Positions, error_location, load_yaml, parse_yaml
 
@@ -81,7 +82,10 @@ def _describe(err: dict, data: Any) -> tuple[tuple, str]:
 
 def validate_scenario(data: Any, positions: Positions, file: str | None = None,
                       base_dir: str | os.PathLike | None = None) -> Scenario:
-    """Validate parsed YAML data; the first problem becomes an InputError with file:line:col."""
+    """Validate parsed YAML data; the first problem becomes an InputError with file:line:col.
+
+    ``repeat`` blocks are expanded first (:mod:`scenarios.repeat`)."""
+    data, positions = expand_repeats(data, positions, file)
     ctx = validation_context(file, base_dir)
     try:
         scn = Scenario.model_validate(data, context=ctx)
@@ -125,4 +129,9 @@ def scenario_json_schema() -> dict:
     """The JSON Schema of scenario files (for editors)."""
     schema = Scenario.model_json_schema()
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    props = schema.setdefault("properties", {})
+    props["repeat"] = REPEAT_JSON_SCHEMA
+    # characters may be an empty list when repeat blocks add them (validated after expansion)
+    if isinstance(props.get("characters"), dict) and props["characters"].pop("minItems", None):
+        schema["anyOf"] = [{"required": ["repeat"]}, {"properties": {"characters": {"minItems": 1}}}]
     return schema

@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     "schedules.cli_learn",      # learn
     "schedules.cli_preview",    # preview, export
     "schedules.cli_audit",      # audit
+    "schedules.cli_sweep",      # sweep
 )
 
 

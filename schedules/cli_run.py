@@ -98,7 +98,7 @@ def goal_verdict(goals: dict, couplings: dict) -> dict:
 
 def run_scenario(name_or_file: str, *, out: str | None = None, report: str | None = None, jobs: int = 1,
                  resume: bool = False, run_dir: str | None = None, fps: float = 30.0, fail_capped: bool = False,
-                 log=sys.stderr) -> dict:
+                 scheduler: str | None = None, store: str | None = None, log=sys.stderr) -> dict:
     """Run a scenario end to end; returns the report dict.  Raises ComposeError on failure."""
     from scenegraph.audit import audit_motion
     from scenegraph.scene import build_scene
@@ -127,13 +127,50 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
         raise InputError(f"--report {report_path}: folder {report_path.parent} does not exist")
 
     schedule = compile_schedule(scn)
+    sched = _open_scheduler(scheduler, jobs)  # before anything is written: unreachable -> exit 2
+    try:
+        return _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, resume, fps, fail_capped,
+                           sched, store, log)
+    finally:
+        if sched is not None:
+            sched.close()
+
+
+def _open_scheduler(scheduler: str | None, jobs: int):
+    """``--scheduler``: None runs the plain executor; else a Dask scheduler (schedules.distributed)."""
+    if scheduler is None:
+        return None
+    from .distributed import connect
+    return connect(scheduler, jobs)
+
+
+def _solve(scene, schedule, rdir, fp, jobs, resume, fail_capped, sched, store, log):
+    from .executor import run_schedule
+    if sched is None:
+        return run_schedule(scene, schedule, run_dir=rdir, fingerprint=fp, jobs=jobs, resume=resume,
+                            fail_capped=fail_capped, log=log)
+    from .distributed import run_schedule_dask
+    from .step_store import default_store
+    store = None if store == "" else (store or default_store())
+    return run_schedule_dask(scene, schedule, sched, run_dir=rdir, fingerprint=fp, resume=resume,
+                             fail_capped=fail_capped, store=store, log=log)
+
+
+def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, resume, fps, fail_capped, sched, store,
+                log) -> dict:
+    from scenegraph.audit import audit_motion
+    from scenegraph.scene import build_scene
+    from scenegraph.usd_export import CharacterTrack, Marker, export_usd
+
+    from .checkpoints import RunLock, atomic_write_text
+    from .executor import run_fingerprint
+
     with RunLock(rdir):  # one writer per run folder, held until the report is written
         scene = build_scene(scn)
         fp = run_fingerprint(source.read_text(encoding="utf-8"), schedule)
         print(f"compose: running {scn.name!r}: {len(schedule)} steps, {len(schedule.generations())} generation(s), "
               f"jobs {jobs}, run folder {rdir}", file=log, flush=True)
-        result = run_schedule(scene, schedule, run_dir=rdir, fingerprint=fp, jobs=jobs, resume=resume,
-                              fail_capped=fail_capped, log=log)
+        result = _solve(scene, schedule, rdir, fp, jobs, resume, fail_capped, sched, store, log)
         final = result.scene
 
         audits = {}
@@ -171,6 +208,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
         rep = {
             "scenario": scn.name, "scenario_file": str(source), "output": str(out_path), "run_dir": str(rdir),
             "jobs": jobs, "resumed_steps": result.resumed, "fps": fps, "presolve": result.presolve,
+            "scheduler": sched.spec if sched is not None else None,
             "steps": [r.to_dict() for r in result.records],
             "characters": {c.name: {"audit": audits[c.name], "energy": energies[c.name],
                                     "styles": [ref for ref, _ in c.styles], "footsteps": len(c.footsteps),
@@ -267,7 +305,9 @@ def _json_default(o):
 
 def _run(args) -> int:
     rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
-                       run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped)
+                       run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped,
+                       scheduler=getattr(args, "scheduler", None),
+                       store="" if getattr(args, "no_store", False) else getattr(args, "store", None))
     # exit 0: every physics audit passes and every goal and coupling expected to hold holds
     # (walk_to, reach, footprints, couplings, the winners' tackle/avoid goals); in adversarial
     # scenes the goals of the side that does not plan last are expected to fail and do not decide it
@@ -290,4 +330,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fail-capped", action="store_true",
                    help="fail the run when a full step stops at its iteration cap, even with every constraint "
                         "satisfied (default: such a step is kept, with its status in the report)")
+    p.add_argument("--scheduler", metavar="local|processes|sync|ADDRESS",
+                   help="run the steps as a Dask task graph: local (LocalCluster of --jobs worker processes), "
+                        "processes, sync, or a Dask scheduler address such as tcp://host:8786 (docs/distributed.md); "
+                        "default: the plain executor")
+    p.add_argument("--store", metavar="DIR", help="content-addressed step store used with --scheduler (default "
+                                                  "$COMPOSE_STEP_STORE or ~/.cache/compose/steps)")
+    p.add_argument("--no-store", action="store_true", help="with --scheduler: solve every step, store nothing")
     p.set_defaults(func=_run)

@@ -97,6 +97,9 @@ def _schedule(args) -> int:
         sys.stdout.write(schedule.to_json() + "\n")
     else:
         sys.stdout.write(schedule.to_text())
+        from .critical_path import critical_path, step_times_from_report
+        times = step_times_from_report(args.times) if getattr(args, "times", None) else None
+        sys.stdout.write(critical_path(schedule, times).to_text())
     if dot is not None:
         schedule.write_dot(dot)
         print(f"wrote {dot}", file=sys.stderr)
@@ -128,4 +131,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dot", metavar="OUT.dot", help="also write the graph in graphviz DOT")
     p.add_argument("--png", metavar="OUT.png", help="also render a PNG (needs graphviz `dot`)")
     p.add_argument("--json", action="store_true", help="print the schedule as JSON instead of text")
+    p.add_argument("--times", metavar="R.json", help="weigh the critical path with the step seconds of a run report")
     p.set_defaults(func=_schedule)

@@ -42,6 +42,7 @@ KINDS = [
     ("walk_to_run", {TIME_LAYERED, TIMEWARP}, 1),
     ("handhold", {COUPLED, TIMEWARP}, 1),
     ("handhold_child_adapts", {COUPLED, TIMEWARP}, 1),
+    ("crowd", {COUPLED, TIMEWARP}, 6),
     ("tackle", {DECREASING_HORIZON, TIMEWARP}, 1),
     ("tackle_dodge", {DECREASING_HORIZON, TIMEWARP}, 1),
     ("two_tacklers", {DECREASING_HORIZON, TIMEWARP}, 1),
