@@ -23,7 +23,12 @@ from .errors import InputError, Location
 
 __all__ = ["load_yaml", "parse_yaml", "read_text", "validate", "load_model", "format_path", "dump_yaml_atomic"]
 
-MAX_BYTES = 2_000_000
+MAX_BYTES = 2_000_000  # any YAML file compose reads (scenarios have their own, smaller limit)
+MAX_DEPTH = 64  # nesting levels of mappings and sequences (a scenario needs about 6, a style 4)
+MAX_NODES = 200_000  # scalars, mappings and sequences in one file
+# libyaml's parser when PyYAML has it (10-20x faster); the pure-Python one otherwise.  Both
+# give the same events, nodes and marks; only the composed tree is used, never the constructor.
+_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _PLAIN_TAGS = {
     "tag:yaml.org,2002:map", "tag:yaml.org,2002:seq", "tag:yaml.org,2002:str",
     "tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:bool",
@@ -51,7 +56,7 @@ def _loc(file: str | None, mark, path: tuple = ()) -> Location:
     return Location(file, mark.line + 1, mark.column + 1, format_path(path) or None)
 
 
-def _construct(node, file, path, positions: Positions):
+def _construct(node, file, path, positions: Positions, ctor):
     positions[path] = (node.start_mark.line + 1, node.start_mark.column + 1)
     if node.tag not in _PLAIN_TAGS:
         raise InputError(f"YAML tag {node.tag!r} is not allowed (plain data only)", _loc(file, node.start_mark, path))
@@ -63,53 +68,104 @@ def _construct(node, file, path, positions: Positions):
             key = key_node.value
             if key in out:
                 raise InputError(f"duplicate key {key!r}", _loc(file, key_node.start_mark, path + (key,)))
-            out[key] = _construct(value_node, file, path + (key,), positions)
+            out[key] = _construct(value_node, file, path + (key,), positions, ctor)
         return out
     if isinstance(node, yaml.SequenceNode):
-        return [_construct(v, file, path + (i,), positions) for i, v in enumerate(node.value)]
-    return _scalar(node)
+        return [_construct(v, file, path + (i,), positions, ctor) for i, v in enumerate(node.value)]
+    return _scalar(node, file, path, ctor)
 
 
-def _scalar(node: yaml.ScalarNode):
-    if node.tag == "tag:yaml.org,2002:str" and node.style is None and _FLOAT_12.fullmatch(node.value):
+def _scalar(node: yaml.ScalarNode, file, path, ctor):
+    if node.tag == "tag:yaml.org,2002:str" and not node.style and _FLOAT_12.fullmatch(node.value):
         return float(node.value)  # plain (unquoted) 1e6: a number, as YAML 1.2 reads it
-    loader = yaml.SafeLoader("")
-    return loader.construct_object(node, deep=True)
+    try:
+        return ctor.construct_object(node, deep=True)
+    except (yaml.YAMLError, ValueError, OverflowError) as exc:  # e.g. a timestamp out of range
+        raise InputError(f"cannot read the value {node.value[:40]!r}: {exc}", _loc(file, node.start_mark, path)) from None
+
+
+def _reader_location(exc: yaml.YAMLError, text: str, file: str | None) -> Location:
+    """Line and column of a ReaderError (it carries a character position, not a mark)."""
+    pos = getattr(exc, "position", None)
+    if not isinstance(pos, int):
+        return Location(file, 1, 1)
+    pos = max(0, min(pos, len(text)))
+    line = text.count("\n", 0, pos) + 1
+    return Location(file, line, pos - (text.rfind("\n", 0, pos) + 1) + 1)
+
+
+def _check_events(text: str, file: str | None) -> None:
+    """One streaming pass over the YAML events (no recursion, nothing built): anchors and
+    aliases are refused, and nesting depth and node count are bounded *before* any node tree
+    or Python object is built (a 100 000-deep ``[[[[…`` would otherwise exhaust the stack)."""
+    depth = nodes = 0
+    for event in yaml.parse(text, Loader=_Loader):
+        if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None):
+            raise InputError("YAML anchors and aliases are not allowed", _loc(file, event.start_mark))
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise InputError(f"nesting deeper than {MAX_DEPTH} levels (a scenario needs about 6)",
+                                 _loc(file, event.start_mark))
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
+        if isinstance(event, (yaml.ScalarEvent, yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            nodes += 1
+            if nodes > MAX_NODES:
+                raise InputError(f"more than {MAX_NODES} values in one file", _loc(file, event.start_mark))
 
 
 def parse_yaml(text: str, file: str | None = None) -> tuple[Any, Positions]:
     """Parse YAML text into plain data plus a field-path → (line, column) map."""
     try:
-        for event in yaml.parse(text, Loader=yaml.SafeLoader):
-            if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None):
-                raise InputError("YAML anchors and aliases are not allowed", _loc(file, event.start_mark))
-        docs = list(yaml.compose_all(text, Loader=yaml.SafeLoader))
+        _check_events(text, file)
+        docs = list(yaml.compose_all(text, Loader=_Loader))
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        loc = _loc(file, mark) if mark else Location(file)
+        loc = _loc(file, mark) if mark else Location(file, 1, 1)
         raise InputError(f"invalid YAML: {exc.problem or exc.context}", loc) from None
-    except yaml.YAMLError as exc:  # pragma: no cover - PyYAML always marks its errors
-        raise InputError(f"invalid YAML: {exc}", Location(file)) from None
+    except yaml.YAMLError as exc:  # a ReaderError: a character YAML does not allow (NUL, …)
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"invalid YAML: {msg}", _reader_location(exc, text, file)) from None
     if len(docs) != 1 or docs[0] is None:
         raise InputError("expected exactly one YAML document with content", Location(file, 1, 1))
     positions: Positions = {}
-    return _construct(docs[0], file, (), positions), positions
+    return _construct(docs[0], file, (), positions, yaml.SafeLoader("")), positions
+
+
+def _line_col(data: bytes, at: int) -> tuple[int, int]:
+    """1-based (line, column) of byte offset ``at`` (the column counts bytes)."""
+    line = data.count(b"\n", 0, at) + 1
+    return line, at - (data.rfind(b"\n", 0, at) + 1) + 1
 
 
 def read_text(path: str | os.PathLike, kind: str, max_bytes: int) -> str:
-    """A UTF-8 input file's text; every failure is an InputError naming the file."""
+    """A UTF-8 input file's text; every failure is an InputError naming the file (and, for a
+    file too large or not UTF-8, the line and column where it goes wrong).  At most
+    ``max_bytes + 1`` bytes are ever read, so a huge file costs nothing."""
     p = Path(path)
     try:
-        size = p.stat().st_size
-        if size > max_bytes:
-            raise InputError(f"file is {size} bytes, more than the {max_bytes} allowed", Location(str(path)))
-        return p.read_text(encoding="utf-8")
+        with open(p, "rb") as fh:
+            data = fh.read(max_bytes + 1)
     except FileNotFoundError:
         raise InputError("file not found", Location(str(path))) from None
     except IsADirectoryError:
         raise InputError(f"is a directory, expected a {kind} file", Location(str(path))) from None
+    except PermissionError:
+        raise InputError("permission denied", Location(str(path))) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file: {exc.strerror or exc}", Location(str(path))) from None
+    if len(data) > max_bytes:
+        line, col = _line_col(data, max_bytes)
+        raise InputError(f"file is larger than the {max_bytes} bytes a {kind} file may have "
+                         "(see docs/reliability.md, input limits)", Location(str(path), line, col))
+    try:
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(f"file is not UTF-8 text (byte {exc.start})", Location(str(path))) from None
+        line, col = _line_col(data, exc.start)
+        raise InputError(f"file is not UTF-8 text (byte {exc.start}: {data[exc.start:exc.start + 1]!r})",
+                         Location(str(path), line, col)) from None
+    return text[1:] if text.startswith("\ufeff") else text  # a byte-order mark some editors write
 
 
 def load_yaml(path: str | os.PathLike) -> tuple[Any, Positions]:

@@ -33,7 +33,13 @@ __all__ = [
 ]
 
 END_SUFFIX = "/End"
-MAX_BYTES = 100_000_000
+# Input limits, checked before anything is allocated (docs/reliability.md): a CMU clip has 31
+# joints (+ End Sites) 8 deep, 62 or 96 channels, a few thousand frames, a few MB.
+MAX_BYTES = 100_000_000  # file size
+MAX_JOINTS = 512  # joints and End Sites
+MAX_DEPTH = 64  # nesting of JOINT blocks
+MAX_CHANNELS = 1024  # channels of one motion line
+MAX_FRAMES = 1_000_000  # frames (2.3 h at 120 fps)
 _ROT = {"Xrotation": 0, "Yrotation": 1, "Zrotation": 2}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 
@@ -193,8 +199,12 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
     names: dict[str, int] = {}
     n_channels = 0
 
-    def parse_joint(parent: int, kw_tok, end_site: bool):
+    def parse_joint(parent: int, kw_tok, end_site: bool, depth: int = 1):
         nonlocal n_channels
+        if depth > MAX_DEPTH:
+            raise tk.error(f"joints nested deeper than {MAX_DEPTH} levels", kw_tok)
+        if len(joints) >= MAX_JOINTS:
+            raise tk.error(f"more than {MAX_JOINTS} joints and End Sites", kw_tok)
         if end_site:
             tk.expect("Site")
             name = joints[parent].name + END_SUFFIX
@@ -228,6 +238,8 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
                 chans.append(c[0])
             channels = tuple(chans)
             n_channels += n
+            if n_channels > MAX_CHANNELS:
+                raise tk.error(f"more than {MAX_CHANNELS} channels in all", ct)
         idx = len(joints)
         joints.append(BvhJoint(name, parent, off, channels, first, kw_tok[1], end_site))
         names[name] = idx
@@ -238,9 +250,9 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
             if end_site:
                 raise tk.error(f"an End Site holds only an OFFSET, found {t[0]!r}", t)
             if t[0] == "JOINT":
-                parse_joint(idx, t, False)
+                parse_joint(idx, t, False, depth + 1)
             elif t[0] == "End":
-                parse_joint(idx, t, True)
+                parse_joint(idx, t, True, depth + 1)
             elif t[0] in _ROT or t[0] in _POS:
                 raise tk.error(f"joint {name!r}: more channel names than CHANNELS declares "
                                f"({len(channels)})", t)
@@ -276,6 +288,8 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
         raise InputError(f"frame count must be an integer, found {parts[1]!r}", Location(file, ln)) from None
     if n_frames < 1:
         raise InputError(f"frame count must be at least 1, found {n_frames}", Location(file, ln))
+    if n_frames > MAX_FRAMES:
+        raise InputError(f"frame count {n_frames} is above the limit of {MAX_FRAMES}", Location(file, ln))
     frames_line = ln
     k = next_nonblank(k + 1)
     if k >= len(body):
@@ -291,6 +305,12 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
     if not (math.isfinite(dt) and 1e-5 <= dt <= 10.0):
         raise InputError(f"frame time must be between 1e-5 and 10 s, found {parts[2]}", Location(file, ln))
 
+    # count the motion lines before allocating: "Frames: 900000" over 3 lines is a truncated
+    # file, not a reason to allocate 900000 rows
+    present = sum(1 for kk in range(k + 1, len(body)) if body[kk].strip())
+    if present < n_frames:
+        raise InputError(f"truncated motion: 'Frames: {n_frames}' (line {frames_line}) but only {present} frame lines",
+                         Location(file, len(lines) + 1))
     data = np.empty((n_frames, n_channels))
     f = 0
     first_line = None
