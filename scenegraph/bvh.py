@@ -40,6 +40,7 @@ MAX_JOINTS = 512  # joints and End Sites
 MAX_DEPTH = 64  # nesting of JOINT blocks
 MAX_CHANNELS = 1024  # channels of one motion line
 MAX_FRAMES = 1_000_000  # frames (2.3 h at 120 fps)
+MAX_VALUE = 1e6  # |OFFSET| and |channel value|: file units (10 km in cm) or degrees
 _ROT = {"Xrotation": 0, "Yrotation": 1, "Zrotation": 2}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 
@@ -153,6 +154,8 @@ class _Tokens:
             raise self.error(f"expected a number for {what}, found {t[0]!r}", t) from None
         if not math.isfinite(v):
             raise self.error(f"{what} must be finite, found {t[0]!r}", t)
+        if abs(v) > MAX_VALUE:
+            raise self.error(f"{what} is {t[0]}, beyond the limit of ±{MAX_VALUE:g}", t)
         return v
 
     def integer(self, what: str) -> int:
@@ -341,6 +344,10 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
         if not np.all(np.isfinite(data[f])):
             bad = next(c for (x, c) in _split_with_columns(line) if not math.isfinite(float(x)))
             raise InputError(f"frame {f}: values must be finite", Location(file, ln, bad))
+        if np.any(np.abs(data[f]) > MAX_VALUE):
+            bad = next(c for (x, c) in _split_with_columns(line) if abs(float(x)) > MAX_VALUE)
+            raise InputError(f"frame {f}: a value beyond ±{MAX_VALUE:g} (file units or degrees)",
+                             Location(file, ln, bad))
         f += 1
     if f < n_frames:
         raise InputError(f"truncated motion: 'Frames: {n_frames}' (line {frames_line}) but only {f} frame lines",

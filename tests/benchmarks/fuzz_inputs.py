@@ -71,7 +71,16 @@ def run_case(kind: str, data: bytes, params: dict, in_dir: Path, work_dir: Path)
     # any line-break convention counts (\r alone, U+2028 …: YAML and str.splitlines honour them)
     n_lines = max(data.count(b"\n"), data.count(b"\r"), len(data.decode("utf-8", "replace").splitlines())) + 1
     try:
-        if kind == "scenario":
+        if kind == "selftest":  # the harness's own checks: a slow, a writing or a crashing "parser"
+            if params.get("sleep"):
+                time.sleep(params["sleep"])
+            if params.get("write"):
+                (work_dir / "stray.txt").write_text("x")
+            if params.get("raise"):
+                raise ValueError("boom")
+            if params.get("unlocated"):
+                raise ComposeError("an error without a place")
+        elif kind == "scenario":
             from scenarios.loader import load_scenario
             from scenegraph.scene import build_scene
             from schedules.cli_scenario import check_scenario
@@ -203,9 +212,8 @@ def _any_value():
     scalars = st.one_of(st.sampled_from(SPECIAL_NUMBERS), st.sampled_from(WEIRD_STRINGS), st.booleans(), st.none(),
                         st.integers(-10 ** 6, 10 ** 6), st.floats(allow_nan=True, allow_infinity=True),
                         st.text(max_size=20), st.sampled_from([_DEEP, _HUGE, _BIGINT]))
-    return st.recursive(scalars, lambda ch: st.one_of(st.lists(ch, max_size=4),
-                                                      st.dictionaries(st.text(max_size=8), ch, max_size=4)),
-                        max_leaves=8)
+    return st.one_of(scalars, st.lists(scalars, max_size=4), st.dictionaries(st.text(max_size=8), scalars, max_size=4),
+                     st.lists(st.lists(scalars, max_size=3), max_size=3))
 
 
 def _paths(node, prefix=()):
