@@ -139,6 +139,24 @@ def _line_col(data: bytes, at: int) -> tuple[int, int]:
     return line, at - (data.rfind(b"\n", 0, at) + 1) + 1
 
 
+def _line_col_streamed(fh, at: int, chunk: int = 1 << 20) -> tuple[int, int]:
+    """(line, column) of byte offset ``at`` of an open file, read in 1 MB chunks (nothing kept)."""
+    fh.seek(0)
+    line, col, pos = 1, 1, 0
+    while pos < at:
+        block = fh.read(min(chunk, at - pos))
+        if not block:
+            break
+        nl = block.count(b"\n")
+        if nl:
+            line += nl
+            col = len(block) - block.rfind(b"\n")
+        else:
+            col += len(block)
+        pos += len(block)
+    return line, col
+
+
 def read_text(path: str | os.PathLike, kind: str, max_bytes: int) -> str:
     """A UTF-8 input file's text; every failure is an InputError naming the file (and, for a
     file too large or not UTF-8, the line and column where it goes wrong).  At most
@@ -146,7 +164,12 @@ def read_text(path: str | os.PathLike, kind: str, max_bytes: int) -> str:
     p = Path(path)
     try:
         with open(p, "rb") as fh:
-            data = fh.read(max_bytes + 1)
+            size = os.fstat(fh.fileno()).st_size
+            if size > max_bytes:  # a regular file: refused before its bytes are read
+                line, col = _line_col_streamed(fh, max_bytes)
+                raise InputError(f"file is {size} bytes, larger than the {max_bytes} bytes a {kind} file may have "
+                                 "(see docs/reliability.md, input limits)", Location(str(path), line, col))
+            data = fh.read(max_bytes + 1)  # a pipe or a growing file: never more than the limit
     except FileNotFoundError:
         raise InputError("file not found", Location(str(path))) from None
     except IsADirectoryError:
