@@ -133,6 +133,13 @@ def parse_yaml(text: str, file: str | None = None) -> tuple[Any, Positions]:
     return _construct(docs[0], file, (), positions, yaml.SafeLoader("")), positions
 
 
+# binary formats a user may hand over by mistake (a renamed file): named instead of "not UTF-8"
+_MAGIC = ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+          (b"%PDF", "a PDF document"), (b"PK\x03\x04", "a ZIP archive (or .usdz)"), (b"PXR-USDC", "a binary USD stage"),
+          (b"\x7fELF", "an executable"), (b"\x1f\x8b", "a gzip archive"), (b"\x93NUMPY", "a numpy array"),
+          (b"\x80\x04", "a Python pickle"), (b"\x80\x05", "a Python pickle"))
+
+
 def _line_col(data: bytes, at: int) -> tuple[int, int]:
     """1-based (line, column) of byte offset ``at`` (the column counts bytes)."""
     line = data.count(b"\n", 0, at) + 1
@@ -182,6 +189,9 @@ def read_text(path: str | os.PathLike, kind: str, max_bytes: int) -> str:
         line, col = _line_col(data, max_bytes)
         raise InputError(f"file is larger than the {max_bytes} bytes a {kind} file may have "
                          "(see docs/reliability.md, input limits)", Location(str(path), line, col))
+    for magic, what in _MAGIC:
+        if data.startswith(magic):
+            raise InputError(f"file is {what}, not a {kind} file", Location(str(path), 1, 1))
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
