@@ -68,7 +68,8 @@ def _describe(err: dict, data: Any) -> tuple[tuple, str]:
     elif msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
     if err["type"] == "extra_forbidden":
-        msg = f"unknown field {path[-1]!r}"
+        key = str(path[-1])
+        msg = f"unknown field {key if len(key) <= 60 else key[:57] + '…'!r}"
     elif err["type"] in _TAG_ERRORS:
         path = path + ("type",)
         if err["type"] == "union_tag_not_found":

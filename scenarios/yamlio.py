@@ -48,7 +48,8 @@ def format_path(path: tuple) -> str:
         if isinstance(p, int):
             out += f"[{p}]"
         else:
-            out += ("." if out else "") + str(p)
+            p = str(p)
+            out += ("." if out else "") + (p if len(p) <= 60 else p[:57] + "…")  # a 1 MB key stays one short line
     return out
 
 

@@ -43,8 +43,9 @@ from hypothesis import seed as hyp_seed
 REPO = Path(__file__).resolve().parents[2]
 SCENARIO_FILES = sorted((REPO / "scenarios").glob("*.yaml"))
 _SHARED = Path(os.environ.get("COMPOSE_SHARED_MOCAP") or REPO.parent / "shared" / "mocap")
-CLIP_FILES = sorted((REPO / "scenarios" / "clips").glob("*.bvh")) + (
-    sorted(_SHARED.glob("*.bvh")) if _SHARED.is_dir() else [])
+_BUNDLED_CLIPS = sorted((REPO / "scenarios" / "clips").glob("*.bvh"))
+CLIP_FILES = _BUNDLED_CLIPS + [p for p in (sorted(_SHARED.glob("*.bvh")) if _SHARED.is_dir() else [])
+                               if p.name not in {b.name for b in _BUNDLED_CLIPS}]  # the delivery, not copied
 PRESETS = ("adult_male", "adult_female", "child")
 OUTCOMES = ("accepted", "located_errors", "crashes", "hangs", "wrote_files")
 
