@@ -171,6 +171,8 @@ def read_text(path: str | os.PathLike, kind: str, max_bytes: int) -> str:
     ``max_bytes + 1`` bytes are ever read, so a huge file costs nothing."""
     p = Path(path)
     try:
+        if p.exists() and not p.is_dir() and not p.is_file():  # a FIFO or device would block or never end
+            raise InputError(f"not a regular file, expected a {kind} file", Location(str(path)))
         with open(p, "rb") as fh:
             size = os.fstat(fh.fileno()).st_size
             if size > max_bytes:  # a regular file: refused before its bytes are read
