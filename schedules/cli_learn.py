@@ -198,16 +198,16 @@ def _cmd_learn(args) -> int:
 
     frames = parse_frames(args.frames)
     # every argument is checked before the clip is read and NIO runs for minutes
-    clip = Path(args.clip)
-    if not clip.is_file():
-        raise InputError(f"no such clip file: {args.clip}" if not clip.exists() else f"{args.clip} is not a file")
-    out = output_path(args.output, clip.with_suffix(".yaml"), "-o/--output", (".yaml", ".yml"))
-    if out.resolve() == clip.resolve():
-        raise InputError(f"-o/--output {out}: is the clip itself")
-    if args.max_iter < 1:
-        raise InputError(f"--max-iter {args.max_iter}: must be at least 1")
     if not 0.0 <= args.alpha_floor <= 1.0:
         raise InputError(f"--alpha-floor {args.alpha_floor}: must lie in [0, 1] (units of 1/M; Σα = 1)")
+    if args.max_iter < 1:
+        raise InputError(f"--max-iter {args.max_iter}: must be at least 1")
+    clip = Path(args.clip)
+    out = output_path(args.output, clip.with_suffix(".yaml"), "-o/--output", (".yaml", ".yml"))
+    if not clip.is_file():
+        raise InputError(f"no such clip file: {args.clip}" if not clip.exists() else f"{args.clip} is not a file")
+    if out.resolve() == clip.resolve():
+        raise InputError(f"-o/--output {out}: is the clip itself")
     t0 = time.perf_counter()
 
     def progress(rec):
