@@ -162,6 +162,8 @@ def scene_from_stage(path, codes: Sequence[float] | None = None, *, with_local: 
     if codes is None:
         t0, t1 = stage_time_range(stage, path)
         codes = np.arange(math.floor(t0), math.floor(t1) + 1, dtype=float)
+    else:
+        stage_time_range(stage, path)  # the frame rate is checked all the same
     codes = np.asarray(codes, dtype=float)
     try:
         return _scene_from_stage(stage, path, codes, with_local)
@@ -199,7 +201,11 @@ def open_stage(path) -> "Usd.Stage":
 
 
 def stage_time_range(stage, path) -> tuple[float, float]:
-    """(start, end) time codes of a stage, checked: finite, ordered, at most MAX_STAGE_FRAMES."""
+    """(start, end) time codes of a stage, checked: a positive frame rate, finite, ordered, at
+    most MAX_STAGE_FRAMES."""
+    tcps = stage.GetTimeCodesPerSecond()
+    if not (math.isfinite(tcps) and 0 < tcps <= 10_000):
+        raise InputError(f"{path}: timeCodesPerSecond {tcps:g} is not a frame rate")
     if not stage.HasAuthoredTimeCodeRange():
         return 0.0, 0.0
     t0, t1 = float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode())

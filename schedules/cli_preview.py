@@ -72,11 +72,9 @@ def _export_bvh(args) -> int:
     if args.fps is not None and not (np.isfinite(args.fps) and 0 < args.fps <= 1000):
         raise InputError(f"--fps {args.fps:g}: must be in (0, 1000]")
     stage = preview.open_stage(stage_path)
-    tcps = stage.GetTimeCodesPerSecond() or 24.0
-    if not (np.isfinite(tcps) and 0 < tcps <= 10_000):
-        raise InputError(f"{stage_path}: timeCodesPerSecond {tcps:g} is not a frame rate")
+    t0, t1 = preview.stage_time_range(stage, stage_path)  # checks timeCodesPerSecond too
+    tcps = stage.GetTimeCodesPerSecond()
     fps = float(args.fps) if args.fps else tcps
-    t0, t1 = preview.stage_time_range(stage, stage_path)
     n = int(np.floor((t1 - t0) / tcps * fps + 1e-9)) + 1
     if n > preview.MAX_STAGE_FRAMES:
         raise InputError(f"{stage_path}: {n} frames at {fps:g} fps, above the limit of {preview.MAX_STAGE_FRAMES}")

@@ -106,3 +106,24 @@ def test_console_script_prints_no_traceback(tmp_path):
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "not a readable USD stage" in lines[0] and "Traceback" not in res.stderr, res.stderr
     assert sorted(p.name for p in tmp_path.rglob("*")) == sorted(["in", "png_renamed.usda"])
+
+
+@pytest.mark.parametrize("edit, fragment", [
+    (("endTimeCode = 2", "endTimeCode = 1e12"), "above the limit of 1000000"),
+    (("timeCodesPerSecond = 10", "timeCodesPerSecond = -5"), "is not a frame rate"),
+    (("startTimeCode = 0", "startTimeCode = 50"), "is not a valid animation range"),
+])
+@pytest.mark.parametrize("command", ["preview", "export-bvh"])
+def test_stage_with_a_broken_time_range(command, edit, fragment, tmp_path, monkeypatch, capsys):
+    """A stage header asking for 10¹² frames, a negative frame rate or a reversed range is
+    refused before any joint transform is read."""
+    inp = tmp_path / "in"
+    inp.mkdir()
+    text = GOLDEN.read_text()
+    assert edit[0] in text
+    stage = inp / "edited.usda"
+    stage.write_text(text.replace(edit[0], edit[1], 1))
+    code, err = _run([command, str(stage), "-o", str(tmp_path / ("o.png" if command == "preview" else "o.bvh"))],
+                     tmp_path, monkeypatch, capsys)
+    assert code == 2 and len(err) == 1 and fragment in err[0], err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == sorted(["in", "edited.usda"])
