@@ -25,6 +25,7 @@ cases=<int> accepted=<int> located_errors=<int> crashes=<int> hangs=<int> wrote_
 from __future__ import annotations
 
 import argparse
+import copy
 import math
 import multiprocessing as mp
 import os
@@ -270,8 +271,8 @@ def _mutate_data(draw, data):
     elif op == "scale":
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             parent[key] = value * draw(st.sampled_from([-1, 0, 1e-6, 0.01, 0.5, 2, 10, 100, 1e6, 1e300]))
-        elif isinstance(value, list) and value:
-            parent[key] = value * draw(st.sampled_from([2, 10, 100, 2000]))
+        elif isinstance(value, list) and value:  # copies, not aliases (a later swap would make a cycle)
+            parent[key] = [copy.deepcopy(v) for _ in range(draw(st.sampled_from([2, 10, 100, 2000]))) for v in value]
     elif op == "rename" and isinstance(parent, dict):
         new = draw(st.one_of(st.sampled_from(["", "name", "type", "time", "target", "character", "steps", "x",
                                               "Name", "time ", "duration"]), st.text(max_size=10)))
@@ -282,7 +283,7 @@ def _mutate_data(draw, data):
         elif isinstance(value, list):
             value.insert(draw(st.integers(0, len(value))), draw(_any_value()))
     elif op == "dup_item" and isinstance(parent, list):
-        parent.insert(key, yaml.safe_load(yaml.safe_dump(value)))
+        parent.insert(key, copy.deepcopy(value))
     elif op == "swap":
         other = draw(st.sampled_from(paths))
         if other and other[:len(path)] != path and path[:len(other)] != other:
@@ -401,7 +402,7 @@ def _clip_seeds() -> list[_Seed]:
 @st.composite
 def scenario_cases(draw, seeds):
     seed = draw(st.sampled_from(seeds))
-    data = yaml.safe_load(yaml.safe_dump(seed.data))  # a deep copy
+    data = copy.deepcopy(seed.data)
     for _ in range(draw(st.integers(0, 3))):
         data = _mutate_data(draw, data)
     text = _expand_sentinels(draw, _dump(data)) if draw(st.integers(0, 9)) else seed.text
@@ -566,7 +567,12 @@ def campaign(n_cases: int, seed: int = 0, timeout: float = 5.0, bvh_share: float
                     if tally.cases < target:
                         record(case)
 
-                one()
+                try:
+                    one()
+                except Exception as exc:  # noqa: BLE001 - a bug of the generator, not of compose
+                    if log is not None:
+                        print(f"harness error while generating (round {round_}): {type(exc).__name__}: {exc}"[:500],
+                              file=log, flush=True)
                 round_ += 1
     finally:
         worker.close()
