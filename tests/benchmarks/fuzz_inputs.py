@@ -295,7 +295,8 @@ def _mutate_data(draw, data):
 
 
 def _dump(data) -> str:
-    text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=120)
+    text = yaml.dump(data, Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper), sort_keys=False, allow_unicode=True,
+                     width=120)
     return text
 
 
