@@ -12,7 +12,6 @@ import importlib.util
 import sys
 from pathlib import Path
 
-import pytest
 
 _spec = importlib.util.spec_from_file_location("fuzz_inputs", Path(__file__).parent / "benchmarks" / "fuzz_inputs.py")
 fuzz = importlib.util.module_from_spec(_spec)
