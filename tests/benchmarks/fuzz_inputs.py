@@ -37,6 +37,7 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import yaml
 from hypothesis import HealthCheck, Phase, given, settings, strategies as st
 from hypothesis import seed as hyp_seed
@@ -91,7 +92,10 @@ def run_case(kind: str, data: bytes, params: dict, in_dir: Path, work_dir: Path)
 
             scn = load_scenario(str(path))
             check_scenario(scn)
-            build_scene(scn)
+            scene = build_scene(scn)
+            for c in scene.characters:  # an accepted scene must be finite: NaN would reach the solver
+                if not (np.all(np.isfinite(c.motion.ctrl)) and np.all(np.isfinite(c.motion.warp))):
+                    raise FloatingPointError(f"the initial motion of {c.name} is not finite")
         else:
             from scenegraph.body import PRESETS as BODY_PRESETS, make_character
             from scenegraph.mocap import read_clip
