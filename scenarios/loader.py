@@ -17,11 +17,14 @@ from .bundled import bundled_styles, find_scenario
 from .errors import InputError, Location
 from .repeat import REPEAT_JSON_SCHEMA, expand_repeats
 from .schema import FieldProblem, Scenario
-from .yamlio import Positions, error_location, load_yaml, parse_yaml
+from .yamlio import Positions, error_location, parse_yaml, read_text
 
 __all__ = ["load_scenario", "parse_scenario", "validate_scenario", "validation_context", "scenario_json_schema"]
 
 _TAG_ERRORS = {"union_tag_invalid", "union_tag_not_found"}
+# characters of a scenario file (UTF-8 bytes): the bundled ones have about 1 000; 1 000
+# footprints written one per line take about 80 000
+MAX_SCENARIO_BYTES = 256_000
 
 
 def validation_context(file: str | os.PathLike | None = None, base_dir: str | os.PathLike | None = None) -> dict:
@@ -66,7 +69,8 @@ def _describe(err: dict, data: Any) -> tuple[tuple, str]:
     elif msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
     if err["type"] == "extra_forbidden":
-        msg = f"unknown field {path[-1]!r}"
+        key = str(path[-1])
+        msg = f"unknown field {key if len(key) <= 60 else key[:57] + '…'!r}"
     elif err["type"] in _TAG_ERRORS:
         path = path + ("type",)
         if err["type"] == "union_tag_not_found":
@@ -118,7 +122,7 @@ def parse_scenario(text: str, file: str | None = None, base_dir: str | os.PathLi
 def load_scenario(path_or_name: str | os.PathLike) -> Scenario:
     """Load a scenario file, or a bundled scenario by name (``walk``, ``tackle``)."""
     path = find_scenario(path_or_name)
-    data, positions = load_yaml(path)
+    data, positions = parse_yaml(read_text(path, "scenario", MAX_SCENARIO_BYTES), str(path))
     if not isinstance(data, dict):
         line, col = positions.get((), (1, 1))
         raise InputError("a scenario must be a mapping of fields", Location(str(path), line, col))

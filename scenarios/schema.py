@@ -21,6 +21,7 @@ offending field's line and column.  Checks that need to know where the scenario 
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
 
@@ -105,6 +106,26 @@ class FieldProblem(ValueError):
 MAX_COORD = 10_000.0  # m: every position lies within ±10 km of the origin (a scene, not a map)
 MAX_SPEED = 12.0  # m/s: a walk_to's average speed, start (or the previous walk_to) to target along
 # its waypoints; the fastest human sprinters peak at about 12.4 m/s (100 m world record pace)
+
+
+# Resource limits (checked at validation, before anything is built; docs/reliability.md):
+MAX_CHARACTER_SECONDS = 60.0  # s: duration × characters; building the initial motions and the
+# transcription grows with it (a 9.6 s window of one character takes ~14 s to build)
+MAX_FOOTPRINTS = 1000  # explicit footprints in all footprints goals together
+MAX_GOALS = 200  # goals of one scenario
+# The solver's collocation rate (scenegraph.problem.Subproblem.collocation_hz; a test asserts
+# they agree): an interval shorter than 1/COLLOCATION_HZ may hold no collocation point
+COLLOCATION_HZ = 30.0
+# Body sizes the plausibility checks use (scenegraph.body.PRESETS; a test asserts they agree)
+PRESET_HEIGHTS = {"adult_male": 1.75, "adult_female": 1.65, "child": 1.20}  # m, default statures
+REACH_UP = 1.35  # highest point a handle reaches, × stature (overhead, on tiptoe: ~1.3)
+REACH_OUT = 0.75  # horizontal reach of a hand from the pelvis, × stature (arm + shoulder + lean)
+LEG_SPREAD = 0.75  # largest distance between two planted feet, × stature (a long lunge)
+
+
+def format_field(path: tuple) -> str:
+    """('goals', 0, 'steps', 2) -> 'goals[0].steps[2]'."""
+    return "".join(f"[{p}]" if isinstance(p, int) else (f".{p}" if i else str(p)) for i, p in enumerate(path))
 
 
 def _coord(v: float) -> float:
@@ -527,7 +548,7 @@ class Scenario(_Model):
                                                                       "default [0.5, 2] × duration")
     environment: Environment = Field(default_factory=Environment)
     characters: list[CharacterSpec] = Field(min_length=1, max_length=16)
-    goals: list[Goal] = Field(default_factory=list, max_length=1000)
+    goals: list[Goal] = Field(default_factory=list, max_length=MAX_GOALS)
     couplings: list[Coupling] = Field(default_factory=list, max_length=100)
     schedule: ScheduleSpec | None = Field(None, description="explicit schedule; default: compiled from the scenario")
 
@@ -656,6 +677,87 @@ class Scenario(_Model):
                     out.append((("goals", j, "target"),
                                 f"target z = {z:g} m is {floor - z:.3g} m below the ground (z = {floor:.3g} m there): "
                                 f"the {g.handle} cannot go through the floor"))
+                    continue
+                out += self._reach_problems(j, g)
+            elif isinstance(g, TackleGoal) and g.attacker in names and g.target in names and g.attacker != g.target:
+                a, b = self.character(g.attacker), self.character(g.target)
+                gap = math.dist(a.start.position, b.start.position) - REACH_OUT * (self._stature(a) + self._stature(b))
+                if gap > 2 * MAX_SPEED * g.time:
+                    out.append((("goals", j, "time"),
+                                f"{g.attacker} and {g.target} start {math.dist(a.start.position, b.start.position):.4g} m "
+                                f"apart: meeting at {g.time:g} s needs {gap / max(g.time, 1e-9):.3g} m/s of closing "
+                                f"speed, above two sprinters' {2 * MAX_SPEED:g} m/s; make the time later"))
+        out += self._footprint_problems()
+        return out
+
+    def _stature(self, c: "CharacterSpec") -> float:
+        """The character's standing height (m): body.height or its preset's."""
+        return c.body.height if c.body.height is not None else PRESET_HEIGHTS[c.body.preset]
+
+    def _anchors(self, name: str) -> list[tuple[float, tuple[float, float], float, str]]:
+        """Where the pelvis of character ``name`` is known to be: (time s, [x, y] m, slack m,
+        what): the start, every walk_to target (within its tolerance), every footprint (within
+        a leg's reach of the foot, for the whole contact)."""
+        c = self.character(name)
+        H = self._stature(c)
+        out = [(0.0, tuple(c.start.position), 0.0, "its start position")]
+        for j, g in enumerate(self.goals):
+            if isinstance(g, WalkToGoal) and g.character == name:
+                out.append((g.time, tuple(g.target), g.tolerance, f"goals[{j}]'s target"))
+            elif isinstance(g, FootprintsGoal) and g.character == name:
+                for i, fp in enumerate(g.steps):
+                    for t in fp.time:
+                        out.append((t, tuple(fp.position), 0.5 * LEG_SPREAD * H, f"goals[{j}].steps[{i}]"))
+        return out
+
+    def _reach_problems(self, j: int, g: "ReachGoal") -> list[tuple[tuple, str]]:
+        """A reach target above the highest point the handle reaches, or too far from every
+        place the character's path can bring its pelvis by the goal's time."""
+        import math
+        c = self.character(g.character)
+        H = self._stature(c)
+        x, y, z = g.target
+        top = self.ground_height(x, y) + REACH_UP * H
+        if z > top + g.tolerance:
+            return [(("goals", j, "target"),
+                     f"target z = {z:g} m is above the {top:.3g} m a {H:g} m tall character reaches "
+                     f"({REACH_UP:g} × its stature over the ground there): the {g.handle} cannot get there")]
+        for t, p, slack, what in self._anchors(g.character):
+            d = math.dist((x, y), p) - slack - REACH_OUT * H - g.tolerance
+            dt = abs(g.time - t)
+            if d > MAX_SPEED * dt + 1e-9:
+                return [(("goals", j, "target"),
+                         f"target {list(g.target)} is out of reach of {g.character}'s path: {math.dist((x, y), p):.4g} m "
+                         f"from {what} ({t:g} s), {dt:g} s from the reach at {g.time:g} s; an arm reaches "
+                         f"{REACH_OUT * H:.2g} m from the pelvis and a sprint covers {MAX_SPEED:g} m/s")]
+        return []
+
+    def _footprint_problems(self) -> list[tuple[tuple, str]]:
+        """Consecutive footprints of a character (both feet, by heel strike) farther apart than
+        a sprint between them plus the widest stance, and a first footprint out of reach of the
+        start."""
+        import math
+        out: list[tuple[tuple, str]] = []
+        for c in self.characters:
+            H = self._stature(c)
+            spread = LEG_SPREAD * H
+            prints = sorted(((fp.time[0], fp.time[1], tuple(fp.position), ("goals", j, "steps", i))
+                             for j, g in enumerate(self.goals) if isinstance(g, FootprintsGoal) and g.character == c.name
+                             for i, fp in enumerate(g.steps)), key=lambda f: (f[0], f[3]))
+            prev = (0.0, 0.0, tuple(c.start.position), None)
+            for f in prints:
+                t0p, t1p, pp, where = prev
+                gap_t = max(f[0] - t1p, 0.0)
+                d = math.dist(f[2], pp)
+                reach = MAX_SPEED * gap_t + (spread if where is not None else 0.5 * spread)
+                if d > reach + 1e-9:
+                    frm = format_field(where) if where is not None else f"the start position of {c.name}"
+                    out.append((f[3] + ("position",),
+                                f"this footprint is {d:.4g} m from {frm}, with {gap_t:g} s between the two contacts: "
+                                f"more than a sprint at {MAX_SPEED:g} m/s plus the widest stance ({spread:.2g} m) "
+                                "covers"))
+                    break
+                prev = f
         return out
 
     def problems(self, context: dict | None = None) -> list[tuple[tuple, str]]:
@@ -669,6 +771,36 @@ class Scenario(_Model):
                 out.append((("duration_bounds",), "duration_bounds needs timing: free"))
             elif not (lo <= T <= hi):
                 out.append((("duration",), f"duration {T} s lies outside duration_bounds [{lo}, {hi}] s"))
+
+        # resource limits: the size of what would be built
+        load = T * len(self.characters)
+        if load > MAX_CHARACTER_SECONDS:
+            out.append((("duration",), f"{len(self.characters)} character(s) × {T:g} s = {load:g} character-seconds, "
+                        f"above the limit of {MAX_CHARACTER_SECONDS:g} (building and solving grow with it; "
+                        "split the scene into shorter scenarios)"))
+        n_prints = 0
+        for j, g in enumerate(self.goals):
+            if isinstance(g, FootprintsGoal):
+                n_prints += len(g.steps)
+                if n_prints > MAX_FOOTPRINTS:
+                    out.append((("goals", j, "steps"), f"more than {MAX_FOOTPRINTS} footprints in all footprints goals"))
+                    break
+        # intervals narrower than one collocation interval hold no collocation point to enforce them
+        dt = 1.0 / COLLOCATION_HZ
+        for j, g in enumerate(self.goals):
+            spans = [(("steps", i, "time"), fp.time[1] - fp.time[0], "contact")
+                     for i, fp in enumerate(g.steps)] if isinstance(g, FootprintsGoal) else []
+            if isinstance(g, StyleChangeGoal) and g.blend is not None:
+                spans.append((("blend",), g.blend, "blend"))
+            for path, w, what in spans:
+                if w < dt - 1e-9:
+                    out.append((("goals", j) + path, f"a {w:.3g} s {what} is shorter than one collocation interval "
+                                f"(1/{COLLOCATION_HZ:g} s = {dt:.3g} s): no collocation point may lie inside it"))
+        for j, c in enumerate(self.couplings):
+            w = c.interval[1] - c.interval[0]
+            if w < dt - 1e-9:
+                out.append((("couplings", j, "interval"), f"a {w:.3g} s coupling is shorter than one collocation "
+                            f"interval (1/{COLLOCATION_HZ:g} s = {dt:.3g} s): no collocation point may lie inside it"))
 
         names: dict[str, int] = {}
         for i, c in enumerate(self.characters):

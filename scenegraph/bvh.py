@@ -33,7 +33,14 @@ __all__ = [
 ]
 
 END_SUFFIX = "/End"
-MAX_BYTES = 100_000_000
+# Input limits, checked before anything is allocated (docs/reliability.md): a CMU clip has 31
+# joints (+ End Sites) 8 deep, 62 or 96 channels, a few thousand frames, a few MB.
+MAX_BYTES = 100_000_000  # file size
+MAX_JOINTS = 512  # joints and End Sites
+MAX_DEPTH = 64  # nesting of JOINT blocks
+MAX_CHANNELS = 1024  # channels of one motion line
+MAX_FRAMES = 1_000_000  # frames (2.3 h at 120 fps)
+MAX_VALUE = 1e6  # |OFFSET| and |channel value|: file units (10 km in cm) or degrees
 _ROT = {"Xrotation": 0, "Yrotation": 1, "Zrotation": 2}
 _POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
 
@@ -147,6 +154,8 @@ class _Tokens:
             raise self.error(f"expected a number for {what}, found {t[0]!r}", t) from None
         if not math.isfinite(v):
             raise self.error(f"{what} must be finite, found {t[0]!r}", t)
+        if abs(v) > MAX_VALUE:
+            raise self.error(f"{what} is {t[0]}, beyond the limit of ±{MAX_VALUE:g}", t)
         return v
 
     def integer(self, what: str) -> int:
@@ -193,8 +202,12 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
     names: dict[str, int] = {}
     n_channels = 0
 
-    def parse_joint(parent: int, kw_tok, end_site: bool):
+    def parse_joint(parent: int, kw_tok, end_site: bool, depth: int = 1):
         nonlocal n_channels
+        if depth > MAX_DEPTH:
+            raise tk.error(f"joints nested deeper than {MAX_DEPTH} levels", kw_tok)
+        if len(joints) >= MAX_JOINTS:
+            raise tk.error(f"more than {MAX_JOINTS} joints and End Sites", kw_tok)
         if end_site:
             tk.expect("Site")
             name = joints[parent].name + END_SUFFIX
@@ -228,6 +241,8 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
                 chans.append(c[0])
             channels = tuple(chans)
             n_channels += n
+            if n_channels > MAX_CHANNELS:
+                raise tk.error(f"more than {MAX_CHANNELS} channels in all", ct)
         idx = len(joints)
         joints.append(BvhJoint(name, parent, off, channels, first, kw_tok[1], end_site))
         names[name] = idx
@@ -238,9 +253,9 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
             if end_site:
                 raise tk.error(f"an End Site holds only an OFFSET, found {t[0]!r}", t)
             if t[0] == "JOINT":
-                parse_joint(idx, t, False)
+                parse_joint(idx, t, False, depth + 1)
             elif t[0] == "End":
-                parse_joint(idx, t, True)
+                parse_joint(idx, t, True, depth + 1)
             elif t[0] in _ROT or t[0] in _POS:
                 raise tk.error(f"joint {name!r}: more channel names than CHANNELS declares "
                                f"({len(channels)})", t)
@@ -276,6 +291,8 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
         raise InputError(f"frame count must be an integer, found {parts[1]!r}", Location(file, ln)) from None
     if n_frames < 1:
         raise InputError(f"frame count must be at least 1, found {n_frames}", Location(file, ln))
+    if n_frames > MAX_FRAMES:
+        raise InputError(f"frame count {n_frames} is above the limit of {MAX_FRAMES}", Location(file, ln))
     frames_line = ln
     k = next_nonblank(k + 1)
     if k >= len(body):
@@ -291,6 +308,12 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
     if not (math.isfinite(dt) and 1e-5 <= dt <= 10.0):
         raise InputError(f"frame time must be between 1e-5 and 10 s, found {parts[2]}", Location(file, ln))
 
+    # count the motion lines before allocating: "Frames: 900000" over 3 lines is a truncated
+    # file, not a reason to allocate 900000 rows
+    present = sum(1 for kk in range(k + 1, len(body)) if body[kk].strip())
+    if present < n_frames:
+        raise InputError(f"truncated motion: 'Frames: {n_frames}' (line {frames_line}) but only {present} frame lines",
+                         Location(file, len(lines) + 1))
     data = np.empty((n_frames, n_channels))
     f = 0
     first_line = None
@@ -321,6 +344,10 @@ def parse_bvh(text: str, file: str = "<bvh>") -> BvhFile:
         if not np.all(np.isfinite(data[f])):
             bad = next(c for (x, c) in _split_with_columns(line) if not math.isfinite(float(x)))
             raise InputError(f"frame {f}: values must be finite", Location(file, ln, bad))
+        if np.any(np.abs(data[f]) > MAX_VALUE):
+            bad = next(c for (x, c) in _split_with_columns(line) if abs(float(x)) > MAX_VALUE)
+            raise InputError(f"frame {f}: a value beyond ±{MAX_VALUE:g} (file units or degrees)",
+                             Location(file, ln, bad))
         f += 1
     if f < n_frames:
         raise InputError(f"truncated motion: 'Frames: {n_frames}' (line {frames_line}) but only {f} frame lines",

@@ -80,6 +80,10 @@ def _root_path(footsteps: tuple[Footstep, ...], times: np.ndarray):
         mids = [((f.t0 + f.t1) / 2, np.array(f.position))]
     kt = np.array([m[0] for m in mids])
     kp = np.array([m[1] for m in mids])
+    # knots at the same time (e.g. three footprints whose outer two share t0 + t1) are merged
+    # into their mean: equal times would divide by zero and make the root path NaN
+    kt, inv = np.unique(kt, return_inverse=True)
+    kp = np.stack([kp[inv == k].mean(axis=0) for k in range(len(kt))])
     if len(kt) == 1:
         xy = np.repeat(kp, len(times), axis=0)
         heading = np.full(len(times), steps[0].heading)

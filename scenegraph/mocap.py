@@ -50,6 +50,7 @@ import scenarios as _scenarios
 
 RIG_DIR = Path(_scenarios.__file__).resolve().parent / "rigs"  # bundled rig files
 DEFAULT_RIG = "cmu"
+MIN_STATURE, MAX_STATURE = 0.5, 2.5  # m: the statures a character can be built at
 _AXES = {"+X": (0, 1.0), "-X": (0, -1.0), "+Y": (1, 1.0), "-Y": (1, -1.0), "+Z": (2, 1.0), "-Z": (2, -1.0)}
 
 
@@ -346,6 +347,10 @@ def read_clip(path: str | os.PathLike, rig: str | os.PathLike | Rig | None = Non
     targets = pos[:, list(var.joint_index)]
     weights = np.array([var.weight(p) for p in var.points])
     H = estimate_stature(targets, var.specs, rig_, preset)
+    if not (MIN_STATURE <= H <= MAX_STATURE):  # what make_character accepts (BodySpec.height)
+        raise InputError(f"the performer's segment lengths give a stature of {H:.3g} m, outside "
+                         f"{MIN_STATURE:g}–{MAX_STATURE:g} m: wrong OFFSETs, or a unit the rig "
+                         f"{rig_.name} (1 unit = {rig_.unit_m:g} m) does not expect", Location(str(path), bvh.joints[0].line))
     for arr in (t_new, pos, targets, weights):
         arr.setflags(write=False)
     return ClipData(str(path), var.label, float(fps), t_new, pos, tuple(bvh.joint_names), targets, var.points,

@@ -29,6 +29,7 @@ from scenarios.errors import ComposeError, InputError
 
 __all__ = [
     "PreviewCharacter", "PreviewMarker", "PreviewScene", "ViewCamera", "parse_camera", "scene_from_stage",
+    "open_stage", "stage_time_range", "MAX_STAGE_FRAMES",
     "scene_from_tracks", "render_strip", "render_movie", "render_preview", "have_ffmpeg",
     "plot_energy_per_cycle", "plot_joint_torques", "plot_footprints", "write_report_plots",
 ]
@@ -171,20 +172,69 @@ def scene_from_stage(path, codes: Sequence[float] | None = None, *, with_local: 
     integer time code from start to end), ellipsoids fitted to the rigidly skinned meshes,
     and compose markers.  Works on every stage :func:`~scenegraph.usd_export.export_usd`
     writes (and on other UsdSkel stages, approximating each mesh by its bounding ellipsoid)."""
-    from pxr import Usd, UsdGeom, UsdSkel
+    from pxr import Tf
+    path = Path(path)
+    stage = open_stage(path)
+    if codes is None:
+        t0, t1 = stage_time_range(stage, path)
+        codes = np.arange(math.floor(t0), math.floor(t1) + 1, dtype=float)
+    else:
+        stage_time_range(stage, path)  # the frame rate is checked all the same
+    codes = np.asarray(codes, dtype=float)
+    try:
+        return _scene_from_stage(stage, path, codes, with_local)
+    except ComposeError:
+        raise
+    except (Tf.ErrorException, ValueError, IndexError, TypeError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
+        # a stage compose did not write, with skeletons or meshes it cannot make sense of
+        reason = " ".join(str(exc).split())[:200]
+        raise InputError(f"{path}: not a stage compose can read ({type(exc).__name__}: {reason})") from None
+
+
+MAX_STAGE_FRAMES = 1_000_000  # time codes read from one stage (a compose stage has 30 per second)
+
+
+def open_stage(path) -> "Usd.Stage":
+    """Open a USD stage; a missing, empty, binary or malformed file is an InputError with a
+    one-line reason (never a pxr.Tf.ErrorException traceback)."""
+    from pxr import Tf, Usd
     path = Path(path)
     if not path.exists():
         raise InputError(f"no such stage: {path}")
-    stage = Usd.Stage.Open(str(path))
+    if not path.is_file():
+        raise InputError(f"{path} is not a file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path} is empty, not a USD stage")
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        reason = next((ln.rsplit(" : ", 1)[-1].strip("'") for ln in lines if "Error in" in ln), "unreadable")
+        raise InputError(f"{path} is not a readable USD stage: {reason[:200]}") from None
     if stage is None:
         raise InputError(f"cannot open {path} as a USD stage")
+    return stage
+
+
+def stage_time_range(stage, path) -> tuple[float, float]:
+    """(start, end) time codes of a stage, checked: a positive frame rate, finite, ordered, at
+    most MAX_STAGE_FRAMES."""
+    tcps = stage.GetTimeCodesPerSecond()
+    if not (math.isfinite(tcps) and 0 < tcps <= 10_000):
+        raise InputError(f"{path}: timeCodesPerSecond {tcps:g} is not a frame rate")
+    if not stage.HasAuthoredTimeCodeRange():
+        return 0.0, 0.0
+    t0, t1 = float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode())
+    if not (math.isfinite(t0) and math.isfinite(t1) and t1 >= t0):
+        raise InputError(f"{path}: time code range [{t0:g}, {t1:g}] is not a valid animation range")
+    if t1 - t0 + 1 > MAX_STAGE_FRAMES:
+        raise InputError(f"{path}: {t1 - t0 + 1:.0f} time codes, above the limit of {MAX_STAGE_FRAMES}")
+    return t0, t1
+
+
+def _scene_from_stage(stage, path: Path, codes: np.ndarray, with_local: bool) -> PreviewScene:
+    from pxr import Usd, UsdGeom, UsdSkel
     tcps = stage.GetTimeCodesPerSecond() or 24.0
-    if codes is None:
-        t0, t1 = stage.GetStartTimeCode(), stage.GetEndTimeCode()
-        if not stage.HasAuthoredTimeCodeRange():
-            t0 = t1 = 0.0
-        codes = np.arange(math.floor(t0), math.floor(t1) + 1, dtype=float)
-    codes = np.asarray(codes, dtype=float)
     cache = UsdSkel.Cache()
     chars: list[PreviewCharacter] = []
     xf = UsdGeom.XformCache()

@@ -192,9 +192,20 @@ def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=
 def _cmd_learn(args) -> int:
     from scenegraph.body import N_JOINT
 
+    from .cli_preview import output_path
+
     frames = parse_frames(args.frames)
+    # every argument is checked before the clip is read and NIO runs for minutes
     if not 0.0 <= args.alpha_floor <= 1.0:
         raise InputError(f"--alpha-floor {args.alpha_floor}: must lie in [0, 1] (units of 1/M; Σα = 1)")
+    if args.max_iter < 1:
+        raise InputError(f"--max-iter {args.max_iter}: must be at least 1")
+    clip = Path(args.clip)
+    out = output_path(args.output, clip.with_suffix(".yaml"), "-o/--output", (".yaml", ".yml"))
+    if not clip.is_file():
+        raise InputError(f"no such clip file: {args.clip}" if not clip.exists() else f"{args.clip} is not a file")
+    if out.resolve() == clip.resolve():
+        raise InputError(f"-o/--output {out}: is the clip itself")
     t0 = time.perf_counter()
 
     def progress(rec):
@@ -222,7 +233,8 @@ def register(sub) -> None:
                                    "and write it as a style YAML file with its provenance.")
     p.add_argument("clip", metavar="CLIP.bvh")
     p.add_argument("--frames", required=True, metavar="A:B", help="source frames A to B (exclusive)")
-    p.add_argument("--body", default="adult_male", metavar="PRESET", help="body preset (default adult_male)")
+    p.add_argument("--body", default="adult_male", choices=("adult_male", "adult_female", "child"),
+                   help="body preset (default adult_male)")
     p.add_argument("-o", "--output", required=True, metavar="STYLE.yaml")
     p.add_argument("--max-iter", type=int, default=200, help="safety limit on NIO iterations (default 200)")
     p.add_argument("--counterexamples", choices=("local", "ipopt"), default="local",

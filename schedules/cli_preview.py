@@ -11,7 +11,7 @@ import numpy as np
 
 from scenarios.errors import InputError
 
-__all__ = ["register", "find_stage"]
+__all__ = ["register", "find_stage", "output_path"]
 
 STAGE_EXTS = (".usda", ".usdc", ".usdz", ".usd")
 
@@ -33,12 +33,27 @@ def find_stage(arg: str) -> Path:
     return p
 
 
+def output_path(value: str | None, default: Path, flag: str, suffixes: tuple[str, ...]) -> Path:
+    """Where a command will write, checked before any work: not a directory, its folder
+    exists, a known suffix, and not the input itself."""
+    p = Path(value) if value else default
+    if p.is_dir():
+        raise InputError(f"{flag} {p}: is a directory")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"{flag} {p}: folder {parent} does not exist")
+    if p.suffix.lower() not in suffixes:
+        raise InputError(f"{flag} {p}: expected a file ending in {', '.join(suffixes)}")
+    return p
+
+
 def _preview(args) -> int:
     from scenegraph import preview
     stage = find_stage(args.stage)
-    out = Path(args.output) if args.output else stage.with_name(stage.stem + "_preview.png")
-    if args.frames < 1:
-        raise InputError("--frames must be at least 1")
+    out = output_path(args.output, stage.with_name(stage.stem + "_preview.png"), "-o/--output",
+                      (".png", ".gif", ".mp4", ".mov", ".m4v"))
+    if not 1 <= args.frames <= 200:
+        raise InputError(f"--frames {args.frames}: must be between 1 and 200")
     cam = preview.parse_camera(args.camera)
     scene = preview.scene_from_stage(stage)
     wanted_movie = out.suffix.lower() in (".mp4", ".mov", ".m4v")
@@ -52,15 +67,17 @@ def _preview(args) -> int:
 def _export_bvh(args) -> int:
     from scenegraph import preview
     from scenegraph.bvh_export import bvh_from_joint_transforms, end_site_of
-    from pxr import Usd
     stage_path = find_stage(args.stage)
-    stage = Usd.Stage.Open(str(stage_path))
-    tcps = stage.GetTimeCodesPerSecond() or 24.0
+    out = output_path(args.output, stage_path.with_suffix(".bvh"), "-o/--output", (".bvh",))
+    if args.fps is not None and not (np.isfinite(args.fps) and 0 < args.fps <= 1000):
+        raise InputError(f"--fps {args.fps:g}: must be in (0, 1000]")
+    stage = preview.open_stage(stage_path)
+    t0, t1 = preview.stage_time_range(stage, stage_path)  # checks timeCodesPerSecond too
+    tcps = stage.GetTimeCodesPerSecond()
     fps = float(args.fps) if args.fps else tcps
-    if not fps > 0:
-        raise InputError("--fps must be positive")
-    t0, t1 = stage.GetStartTimeCode(), stage.GetEndTimeCode()
     n = int(np.floor((t1 - t0) / tcps * fps + 1e-9)) + 1
+    if n > preview.MAX_STAGE_FRAMES:
+        raise InputError(f"{stage_path}: {n} frames at {fps:g} fps, above the limit of {preview.MAX_STAGE_FRAMES}")
     codes = t0 + np.arange(n) * (tcps / fps)  # UsdSkel interpolates between samples
     scene = preview.scene_from_stage(stage_path, codes, with_local=True)
     chars = scene.characters
@@ -69,7 +86,6 @@ def _export_bvh(args) -> int:
         if not chars:
             raise InputError(f"no character {args.character!r} in {stage_path} "
                              f"(has: {', '.join(c.name for c in scene.characters)})")
-    out = Path(args.output) if args.output else stage_path.with_suffix(".bvh")
     for c in chars:
         path = out if len(chars) == 1 else out.with_name(f"{out.stem}_{c.name.replace(' ', '_')}{out.suffix}")
         ends = {}

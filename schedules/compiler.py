@@ -57,7 +57,7 @@ from scenarios.weights import START_WEIGHT
 from .step import (COUPLED, DECREASING_HORIZON, FREE, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)
 
-__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows", "receding_windows", "MIN_WINDOW"]
+__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows", "receding_windows", "MIN_WINDOW", "MAX_STEPS"]
 
 DEFAULT_CYCLES = {TIME_LAYERED: 2, COUPLED: 4, DECREASING_HORIZON: 3}
 EPS = 1e-9
@@ -67,6 +67,7 @@ EPS = 1e-9
 # 0.2 s frees at least one point and holds 6 collocation points at 30 Hz.  A style change
 # 0.05 s after the start compiled a 0.05 s seam and died in CasADi ("Degenerate map operation").
 MIN_WINDOW = 0.2
+MAX_STEPS = 2000  # steps of one schedule (the bundled scenarios have at most a few dozen)
 
 
 @dataclass
@@ -494,6 +495,22 @@ def _edges(blocks: list[_Block]) -> list[tuple[str, str]]:
     return edges
 
 
+def _check_size(scn: Scenario, steps: list[Step]) -> None:
+    """At most MAX_STEPS steps (each one a solve of seconds to minutes), else an InputError
+    located at what multiplies them: ``schedule.cycles``, ``schedule.max_window``, or the duration."""
+    if len(steps) <= MAX_STEPS:
+        return
+    from scenarios.errors import InputError
+
+    spec = scn.schedule
+    path = ("schedule", "cycles") if spec is not None and spec.cycles is not None else \
+        ("schedule", "max_window") if spec is not None and "max_window" in spec.model_fields_set else ("duration",)
+    raise InputError(f"the schedule would have more than {MAX_STEPS} steps ({len(steps)} already, "
+                     f"{len(scn.characters)} character(s), {scn.duration:g} s); every step is a solve of seconds to "
+                     "minutes: use fewer cycles, a longer max_window, fewer characters or a shorter scene",
+                     scn.location(path))
+
+
 def _check_windows(scn: Scenario, steps: list[Step]) -> None:
     """Every Step's window spans at least MIN_WINDOW, else an InputError located at the field
     that made it narrow: the nearest style change (its seam window is half the shorter
@@ -565,6 +582,7 @@ def compile_schedule(scn: Scenario) -> Schedule:
     all_steps: list[Step] = []
     all_edges: list[tuple[str, str]] = []
     groups: list[Group] = []
+    programs: list[list[_Block]] = []
     for members in components:
         sub = st.graph.subgraph(members)
         adversarial = any(d["adversarial"] for _, _, d in sub.edges(data=True))
@@ -589,14 +607,17 @@ def compile_schedule(scn: Scenario) -> Schedule:
         for b in blocks:
             b.steps = _steps_of(st, b, name, styles)
             all_steps += b.steps
-        all_edges += _edges(blocks)
+        _check_size(scn, all_steps)
+        programs.append(blocks)
         groups.append(group)
 
+    _check_windows(scn, all_steps)
+    for blocks in programs:  # quadratic in the blocks of a branch: after the size check
+        all_edges += _edges(blocks)
     g = nx.DiGraph()
     for s in all_steps:
         g.add_node(s.id)
     g.add_edges_from(all_edges)
-    _check_windows(scn, all_steps)
     _check_hard_couplings(scn, all_steps)
     reduced = nx.transitive_reduction(g)
     return Schedule.from_steps(all_steps, sorted(reduced.edges()), scenario=scn.name, groups=tuple(groups),

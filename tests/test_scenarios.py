@@ -99,7 +99,7 @@ characters:
 goals:
   - {type: walk_to, character: a, target: [10.0, 0.0], time: 1.0}
   - {type: walk_to, character: a, target: [10.0, 5.0], time: 2.0, waypoints: [[12.0, 2.0]]}
-  - {type: reach, character: a, handle: palm_r, target: [0.3, 0.0, 0.0], time: 0.5}
+  - {type: reach, character: a, handle: palm_r, target: [4.0, 0.0, 0.0], time: 0.5}
   - {type: reach, character: a, handle: palm_l, target: [5.0, 0.0, 0.2], time: 0.6}
 """
     scn = parse_scenario(text, "ok.yaml")
