@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from importlib.metadata import PackageNotFoundError, version
 
@@ -30,6 +31,8 @@ def _version() -> str:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="compose", description=__doc__)
     parser.add_argument("--version", action="version", version=f"compose {_version()}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the Python traceback of an unexpected error (also COMPOSE_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         try:
@@ -48,11 +51,23 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    if args.debug:
+        os.environ["COMPOSE_DEBUG"] = "1"  # read by the executor (a step's crash) and below
     try:
         return int(args.func(args) or 0)
     except ComposeError as exc:
         print(f"compose: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except KeyboardInterrupt:
+        print("compose: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug: one line, the traceback only on request
+        from .interrupts import crash_message, debug_enabled, format_traceback
+        if debug_enabled():
+            print(format_traceback(exc), end="", file=sys.stderr)
+        print(f"compose: internal error: {crash_message(exc)} (run with --debug or COMPOSE_DEBUG=1 for the "
+              "traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

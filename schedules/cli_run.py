@@ -327,9 +327,38 @@ def _json_default(o):
     raise TypeError(type(o).__name__)
 
 
+def resume_command(args) -> str:
+    """The ``compose run … --resume`` command line that continues the run of ``args``."""
+    import shlex
+    words = ["compose", "run", args.file, "--resume"]
+    for flag, value in (("--run-dir", args.run_dir), ("-o", args.output), ("--report", args.report)):
+        if value is not None:
+            words += [flag, str(value)]
+    if args.jobs != 1:
+        words += ["--jobs", str(args.jobs)]
+    if args.fps != 30.0:
+        words += ["--fps", f"{args.fps:g}"]
+    if args.fail_capped:
+        words.append("--fail-capped")
+    return " ".join(shlex.quote(w) for w in words)
+
+
 def _run(args) -> int:
-    rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
-                       run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped)
+    """``compose run``; SIGINT/SIGTERM stop it with one line naming the step and the
+    ``--resume`` command (exit 130/143), the finished steps' checkpoints kept."""
+    from . import interrupts
+    with interrupts.catching_interrupts():
+        try:
+            rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
+                               run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped)
+        except interrupts.RunInterrupted as exc:
+            print(f"compose: {exc.message}; resume with: {resume_command(args)}", file=sys.stderr, flush=True)
+            return exc.exit_code
+        except KeyboardInterrupt:  # outside the steps: loading, or the audit and export after the last step
+            signum = interrupts.requested() or 2
+            print(f"compose: interrupted during {interrupts.phase()}; resume with: {resume_command(args)}",
+                  file=sys.stderr, flush=True)
+            return 128 + signum
     # exit 0: every physics audit passes and every goal and coupling expected to hold holds
     # (walk_to, reach, footprints, couplings, the winners' tackle/avoid goals); in adversarial
     # scenes the goals of the side that does not plan last are expected to fail and do not decide it

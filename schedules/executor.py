@@ -50,11 +50,13 @@ from scenegraph.problem import HandleTarget, Subproblem, solve, window_mask
 from scenegraph.style import Style
 from scenegraph.synthesis import presolve_kinematics
 
+from . import interrupts
 from .checkpoints import Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
+from .interrupts import RunInterrupted, catching_interrupts, crash_message, debug_enabled, format_traceback
 from .step import COUPLED, FREE, FULL, Schedule, Step
 
 __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
-           "run_fingerprint"]
+           "run_fingerprint", "RunInterrupted"]
 
 STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
@@ -253,6 +255,7 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
             sp = replace(sp, contact_guess=contacts[who],
                          ipopt_options=sp.ipopt_options + WARM_IPOPT)
         res = solve(sp)
+        interrupts.check()  # CasADi swallows a KeyboardInterrupt raised inside IPOPT's callbacks
         old = cur.character(who)
         motion = res.motion
         if mask is not None:  # write back only the window's control points
@@ -278,6 +281,7 @@ def presolve_character(scene: Scene, who: str) -> dict:
     """Make a character's initial motion satisfy its footsteps and the ground (no dynamics)."""
     st = scene.character(who)
     pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground)
+    interrupts.check()
     return {"step": f"presolve:{who}", "ctrl": np.asarray(pre.motion.ctrl, float),
             "warp": np.asarray(pre.motion.warp, float), "status": pre.status, "success": bool(pre.success),
             "iterations": pre.iterations, "seconds": pre.seconds,
@@ -355,6 +359,26 @@ def _sum_timings(parts: list[dict]) -> dict:
 
 
 
+def _guarded(at: tuple[int, str], run_dir: Path, log, fn):
+    """``fn()``; an unexpected exception (not a :class:`ComposeError`) becomes the failure of
+    step ``at`` — ``step N (<name>) failed: <ExcType>: <msg>`` on one line, exit code 1 — with
+    the traceback on ``log`` only under ``COMPOSE_DEBUG=1`` (``compose --debug``).  A stop
+    request recorded while ``fn`` ran (see :mod:`schedules.interrupts`) raises
+    ``KeyboardInterrupt``, so an interrupted solve is never checkpointed."""
+    try:
+        out = fn()
+    except (ComposeError, KeyboardInterrupt):
+        raise
+    except Exception as exc:
+        interrupts.check()  # an exception caused by the interrupt is the interrupt
+        if debug_enabled():
+            print(format_traceback(exc), end="", file=log, flush=True)
+        raise StepFailed(f"step {at[0]} ({at[1]}) failed: {crash_message(exc)}; finished steps are kept in "
+                         f"{run_dir}") from exc
+    interrupts.check()
+    return out
+
+
 def _fmt_s(s: float) -> str:
     s = max(0.0, s)
     return f"{int(s // 60)}m{int(s % 60):02d}s" if s >= 60 else f"{s:.0f}s"
@@ -362,10 +386,21 @@ def _fmt_s(s: float) -> str:
 
 # --- the run --------------------------------------------------------------------------------
 
+def _remove_temporaries(run_dir: Path) -> None:
+    """Temporary files of atomic writes cut short by a SIGKILL (never at a final path; the
+    caller holds the run lock, so no live writer owns them)."""
+    for folder in (run_dir, run_dir / "steps"):
+        if folder.is_dir():
+            for p in folder.glob(".*.tmp"):
+                if p.is_file():
+                    p.unlink()
+
+
 def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> tuple[Manifest, dict | None]:
     """Create or check the run folder; returns (manifest to commit new checkpoints to, the
     manifest data read on resume or None).  Without resume, old checkpoints are removed."""
     man = run_dir / "manifest.json"
+    _remove_temporaries(run_dir)
     if resume and man.exists():
         old = Manifest.load(run_dir)
         if old.get("format") != FORMAT:
@@ -411,7 +446,7 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
     of decreasing-horizon and coupled schedules short on purpose (coupled full steps are
     capped at COUPLED_FULL_MAX_ITER)."""
     run_dir = Path(run_dir)
-    with RunLock(run_dir):
+    with catching_interrupts(), RunLock(run_dir):
         return _run_locked(scene, schedule, run_dir, fingerprint, jobs, resume, fail_capped, log)
 
 
@@ -433,8 +468,11 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
     resumed = 0
     done = 0
     solve_seconds = 0.0
-    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else None
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=interrupts.ignore_interrupts_in_worker) \
+        if jobs > 1 else None
     presolved: dict = {}
+    finished = False
+    at = (0, "start")  # (1-based step number, name) being worked on: named by an interrupt or a crash
     try:
         # 0. one kinematic pre-solve per character, before its first step (checkpointed too)
         names = list(first_of)
@@ -445,11 +483,13 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                 loaded[who] = d
             else:
                 todo_pre.append(who)
-        if pool is not None and len(todo_pre) > 1:
-            futs = {who: pool.submit(presolve_character, scene, who) for who in todo_pre}
-            fresh = {who: futs[who].result() for who in todo_pre}
-        else:
-            fresh = {who: presolve_character(scene, who) for who in todo_pre}
+        futs = {who: pool.submit(presolve_character, scene, who) for who in todo_pre} \
+            if pool is not None and len(todo_pre) > 1 else {}
+        fresh = {}
+        for who in todo_pre:
+            at = (0, f"presolve {who}")
+            fresh[who] = _guarded(at, run_dir, log, futs[who].result if who in futs
+                                  else (lambda who=who: presolve_character(scene, who)))
         for who in names:
             d = loaded.get(who) or fresh[who]
             if who in fresh:
@@ -488,7 +528,8 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                 pending = [(s, (lambda s=s: solve_step(snapshot, s, pre[s.id], contact))) for s in todo]
             for s, get in pending:
                 t0 = time.perf_counter()
-                d = get()
+                at = (index[s.id] + 1, s.id)
+                d = _guarded(at, run_dir, log, get)
                 d["fingerprint"] = fingerprint
                 results[s.id] = d
                 rec = _record(index[s.id], s, d)
@@ -538,8 +579,15 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                 if s.kind == FULL:
                     for who, c in d["characters"].items():
                         contact[who] = _merge_contacts(contact.get(who), c["contact_forces"], c.get("window"))
+        finished = True
+        interrupts.set_phase(f"the audit and export (all {n} steps are checkpointed)")
+    except KeyboardInterrupt:  # SIGINT/SIGTERM (interrupts.catching_interrupts): the step's result is not kept
+        raise RunInterrupted(at[0], at[1], interrupts.requested()) from None
     finally:
         if pool is not None:
+            if not finished:  # do not wait minutes for workers' solves whose results are not wanted
+                for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                    proc.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
     return RunResult(scene, [records[i] for i in sorted(records)], time.perf_counter() - t_start, contact, resumed,
                      presolved)
