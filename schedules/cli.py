@@ -51,8 +51,21 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    debug_before = os.environ.get("COMPOSE_DEBUG")
     if args.debug:
         os.environ["COMPOSE_DEBUG"] = "1"  # read by the executor (a step's crash) and below
+    try:
+        return _call(args)
+    finally:
+        if args.debug:  # main() may be called in-process (tests): leave the environment as it was
+            if debug_before is None:
+                os.environ.pop("COMPOSE_DEBUG", None)
+            else:
+                os.environ["COMPOSE_DEBUG"] = debug_before
+
+
+def _call(args) -> int:
+    """Run the sub-command; every error becomes one line on stderr and an exit code."""
     try:
         return int(args.func(args) or 0)
     except ComposeError as exc:

@@ -183,7 +183,7 @@ def goal_verdict(goals: dict, couplings: dict) -> dict:
 
 def run_scenario(name_or_file: str, *, out: str | None = None, report: str | None = None, jobs: int = 1,
                  resume: bool = False, run_dir: str | None = None, fps: float = 30.0, fail_capped: bool = False,
-                 log=sys.stderr) -> dict:
+                 log=None) -> dict:
     """Run a scenario end to end; returns the report dict.  Raises ComposeError on failure."""
     from scenegraph.audit import audit_motion
     from scenegraph.scene import build_scene
@@ -194,6 +194,7 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
     from .checkpoints import RunLock, atomic_write_text
     from .executor import run_fingerprint, run_schedule
 
+    log = sys.stderr if log is None else log  # bound at call time (a test may swap sys.stderr)
     t0 = time.perf_counter()
     if jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {jobs}")

@@ -435,7 +435,7 @@ def _resumed(old: dict | None, run_dir: Path, name: str, log) -> dict | None:
 
 
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
-                 jobs: int = 1, resume: bool = False, fail_capped: bool = False, log=sys.stderr) -> RunResult:
+                 jobs: int = 1, resume: bool = False, fail_capped: bool = False, log=None) -> RunResult:
     """Run every Step of ``schedule`` over ``scene``; see the module docstring.
 
     A full step must end with every hard constraint satisfied.  One that reached its
@@ -445,6 +445,7 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
     problems (0.1–0.2 % per iterate for hundreds of iterates), and the thesis cuts the moves
     of decreasing-horizon and coupled schedules short on purpose (coupled full steps are
     capped at COUPLED_FULL_MAX_ITER)."""
+    log = sys.stderr if log is None else log  # bound at call time (a test may swap sys.stderr)
     run_dir = Path(run_dir)
     with catching_interrupts(), RunLock(run_dir):
         return _run_locked(scene, schedule, run_dir, fingerprint, jobs, resume, fail_capped, log)
