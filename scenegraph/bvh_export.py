@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,6 +34,7 @@ import numpy as np
 
 from scenarios.errors import ComposeError, InputError
 
+from .atomic_files import atomic_write
 from .body import N_DOF, Character
 from .kinematics import numeric_fk
 
@@ -189,22 +189,15 @@ def resample_q(q: np.ndarray, source_fps: float, fps: float) -> np.ndarray:
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same directory + rename."""
+    """Write ``text`` (ASCII) to ``path`` with :func:`scenegraph.atomic_files.atomic_write`
+    (temporary file, fsync, umask mode, rename, folder fsync)."""
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(f"cannot write {path}: directory {parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
     try:
-        with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        atomic_write(path, text.encode("ascii"))
     except OSError as exc:
         raise ComposeError(f"could not write {path}: {exc}") from exc
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def export_bvh(path, track, fps: float, *, source_fps: float | None = None, units: str = "cm") -> Path:

@@ -28,6 +28,8 @@ import numpy as np
 
 from scenarios.errors import ComposeError, InputError
 
+from .atomic_files import atomic_replace
+
 __all__ = [
     "PreviewCharacter", "PreviewMarker", "PreviewScene", "ViewCamera", "parse_camera", "scene_from_stage",
     "scene_from_tracks", "render_strip", "render_movie", "render_preview", "have_ffmpeg",
@@ -346,14 +348,6 @@ def _pick_frames(scene: PreviewScene, n: int) -> list[int]:
     return sorted(set(int(round(x)) for x in np.linspace(0, T - 1, n)))
 
 
-def _new_file_mode() -> int:
-    """The mode a new file gets under the process umask (0644 under umask 022): the temporary
-    files of the atomic writes come from ``mkstemp``, which makes them 0600."""
-    old = os.umask(0o022)
-    os.umask(old)
-    return 0o666 & ~old
-
-
 def _atomic_save(fig, path: Path, **kw) -> Path:
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
@@ -363,8 +357,7 @@ def _atomic_save(fig, path: Path, **kw) -> Path:
     os.close(fd)
     try:
         fig.savefig(tmp, **kw)
-        os.chmod(tmp, _new_file_mode())
-        os.replace(tmp, path)
+        atomic_replace(tmp, path)  # fsync, umask mode, rename, folder fsync
     except OSError as exc:
         raise ComposeError(f"could not write {path}: {exc}") from exc
     finally:
@@ -424,8 +417,7 @@ def render_movie(scene: PreviewScene, out, *, camera: ViewCamera | str | None = 
             for k in all_k:
                 _draw_frame(ax, scene, k, cam, all_k, limits)
                 writer.grab_frame()
-        os.chmod(tmp, _new_file_mode())
-        os.replace(tmp, out)
+        atomic_replace(tmp, out)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

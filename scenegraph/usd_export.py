@@ -55,6 +55,7 @@ import numpy as np
 
 from scenarios.errors import ComposeError, InputError
 
+from .atomic_files import atomic_replace
 from .body import N_DOF, Character, standing_pose
 from .kinematics import numeric_fk
 
@@ -736,9 +737,7 @@ def export_usd(path, characters: Sequence[CharacterTrack], fps: float, *, marker
         else:
             tmp = os.path.join(tmpdir, path.name)
             _export_layer(stage.GetRootLayer(), tmp)
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        atomic_replace(tmp, path)  # fsync, umask mode, rename, folder fsync
     except ComposeError:
         raise
     except OSError as exc:

@@ -26,7 +26,6 @@ import io
 import json
 import os
 import re
-import tempfile
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
@@ -34,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from scenarios.errors import ComposeError, InputError, Location
+from scenegraph.atomic_files import atomic_write, file_mode
 from scenegraph.footsteps import Footstep
 
 __all__ = ["atomic_write", "atomic_write_text", "file_mode", "sha256_bytes", "sha256_file",
@@ -46,57 +46,7 @@ _NAME = re.compile(r"^(?:\d{3}|000_[A-Za-z_][A-Za-z0-9_]{0,63})$")
 _HEX64 = re.compile(r"^[0-9a-f]{64}$")
 
 
-# --- atomic files ---------------------------------------------------------------------------------
-
-def file_mode() -> int:
-    """Mode of a new regular file under the process umask (0644 under the usual umask 022)."""
-    try:  # Linux: read the umask without changing it (os.umask would, briefly, for every thread)
-        with open("/proc/self/status", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("Umask:"):
-                    return 0o666 & ~int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    old = os.umask(0o022)
-    os.umask(old)
-    return 0o666 & ~old
-
-
-def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` so that ``path`` is either its old content or all of ``data``.
-
-    A temporary file next to ``path`` is written, flushed and fsync'ed, given the mode a new
-    file gets under the umask (``mkstemp`` would leave 0600), then renamed over ``path``; the
-    folder is fsync'ed so the rename survives a power cut.  On any failure (or a signal) the
-    temporary file is removed.  The parent folder is created if needed."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fchmod(fh.fileno(), file_mode())
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    try:
-        dfd = os.open(path.parent, os.O_RDONLY)
-    except OSError:
-        return path
-    try:
-        os.fsync(dfd)
-    except OSError:
-        pass
-    finally:
-        os.close(dfd)
-    return path
-
+# --- atomic files (scenegraph.atomic_files: the one writer of every run output) ---------------
 
 def atomic_write_text(text: str, path: str | os.PathLike) -> Path:
     """:func:`atomic_write` of UTF-8 text (argument order of the executor's old helper)."""
