@@ -413,13 +413,15 @@ def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> tuple[Mani
                              "remove it or run without --resume", Location(str(man)))
         committed = {k: v for k, v in old.get("checkpoints", {}).items()}
         return Manifest(run_dir, FORMAT, fingerprint, committed), old
+    # commit the empty manifest first, then remove the old files: a kill in between must not
+    # leave a manifest naming checkpoints that are gone (--resume would refuse the folder)
+    manifest = Manifest(run_dir, FORMAT, fingerprint)
+    manifest.save()
     steps = run_dir / "steps"
     if steps.is_dir():
         for pattern in ("*.pkl", "*.npz", "*.json", ".*.tmp"):
             for p in steps.glob(pattern):
                 p.unlink()
-    manifest = Manifest(run_dir, FORMAT, fingerprint)
-    manifest.save()
     return manifest, None
 
 
