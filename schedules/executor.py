@@ -24,6 +24,11 @@ Semantics (kept identical for every ``--jobs``):
   cap with every hard constraint satisfied is kept with a warning (unless ``fail_capped``),
   and a *timing* step that did not converge or violates a constraint is discarded (the full
   step after it starts from the state before it).  The run folder keeps every finished Step.
+* SIGINT/SIGTERM stop the run at once (:mod:`schedules.interrupts`): the interrupted step is
+  not checkpointed, :class:`RunInterrupted` names it (exit code 130/143).  Any other exception
+  raised inside a step (transcription, solver, a worker) becomes :class:`StepFailed`
+  ``step N (<name>) failed: <ExcType>: <msg>`` (exit 1); its traceback is printed only under
+  ``COMPOSE_DEBUG=1``.  Either way the finished steps' checkpoints are kept.
 
 Test hook: ``COMPOSE_STOP_AFTER=N`` stops the process with exit code ``STOP_EXIT`` right
 after the N-th newly solved Step has been written; ``COMPOSE_MAX_ITER=N`` caps IPOPT

@@ -306,3 +306,34 @@ def test_sigkill_while_writing_leaves_only_whole_files(tmp_path):
         # the next run's prepare step removes the temporaries of the killed one
         ex.prepare_run_dir(d, "fp", resume=True)
         assert not list(d.rglob(".*.tmp"))
+
+
+def _slow_solve(scene, step, presolve, contacts=None):  # runs in a worker process (pickled by name)
+    time.sleep(60)
+    return _fake_solution(scene, step)
+
+
+def test_interrupt_with_jobs_ends_the_workers(tmp_path, monkeypatch):
+    """--jobs 2: the workers ignore SIGINT (Ctrl-C reaches the whole process group); the parent
+    stops at once and terminates the workers instead of waiting for their solves."""
+    from scenarios.loader import load_scenario
+    from scenegraph.scene import build_scene
+    from schedules.compiler import compile_schedule
+    import threading
+
+    scn = load_scenario("two_walkers")
+    scene, schedule = build_scene(scn), compile_schedule(scn)
+
+    monkeypatch.setattr(ex, "presolve_character", _fake_presolve)
+    monkeypatch.setattr(ex, "solve_step", _slow_solve)
+    timer = threading.Timer(2.0, os.kill, (os.getpid(), signal.SIGINT))
+    t0 = time.perf_counter()
+    timer.start()
+    try:
+        with pytest.raises(interrupts.RunInterrupted) as e:
+            ex.run_schedule(scene, schedule, run_dir=tmp_path, fingerprint="fp", jobs=2, log=io.StringIO())
+    finally:
+        timer.cancel()
+    assert time.perf_counter() - t0 < 30, "waited for the workers' solves"
+    assert e.value.step == 1 and e.value.exit_code == 130
+    assert _committed(tmp_path) == ["000_alice", "000_bob"]
