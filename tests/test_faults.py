@@ -337,3 +337,21 @@ def test_interrupt_with_jobs_ends_the_workers(tmp_path, monkeypatch):
     assert time.perf_counter() - t0 < 30, "waited for the workers' solves"
     assert e.value.step == 1 and e.value.exit_code == 130
     assert _committed(tmp_path) == ["000_alice", "000_bob"]
+
+
+def test_run_outputs_get_the_umask_mode_and_leave_no_temporaries(tmp_path):
+    """BVH and USD go through scenegraph.atomic_files like the checkpoints and the report: the
+    file gets the mode of a new file under the umask (``mkstemp`` alone gives 0600)."""
+    import stat
+    from scenegraph.body import N_DOF, make_character
+    from scenegraph.bvh_export import export_bvh
+    from scenegraph.usd_export import CharacterTrack, export_usd
+    tr = CharacterTrack("A", make_character(), np.zeros((4, N_DOF)))
+    old = os.umask(0o027)
+    try:
+        paths = [export_bvh(tmp_path / "a.bvh", tr, 30.0), export_usd(tmp_path / "a.usda", [tr], 30.0)]
+    finally:
+        os.umask(old)
+    for p in paths:
+        assert stat.S_IMODE(p.stat().st_mode) == 0o640, p
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.usda"]
