@@ -14,8 +14,9 @@
    checkpoint matches its SHA-256); a file that is not is *half-written*.  Then
    ``compose run … --resume`` finishes the run and its stage's joint world transforms
    (UsdSkel, every joint, every frame) are compared with the reference's: identical to
-   1e-9 counts as *resumed identical*.  A run that ended before its kill moment is not
-   counted as a kill (printed as ``missed``).
+   1e-9 counts as *resumed identical*.  A kill moment is a fraction of the run's length,
+   estimated from the latest run (load changes it); a run that ended before its moment is
+   not a kill (counted in ``missed``) and the same fraction is tried again, up to 3 times.
 3. ``--lock-tries N``: while a run holds its folder, N more ``compose run`` on that folder
    are started; each must be refused (exit 2, "in use", the holder's PID).  The holder is
    then SIGKILLed and the stale lock must be taken over at once.
@@ -233,25 +234,36 @@ def main() -> None:
         # 2. kills
         k_export = math.ceil(args.kills / 5) if args.kills else 0
         k_time = args.kills - k_export
-        plan = [("time", (i + rng.random()) / max(k_time, 1) * 0.97 * t_last) for i in range(k_time)]
+        # a moment is a fraction of the run up to its last step line; the run's length is estimated
+        # from the latest run seen (machine load changes it): a run that ends before its kill moment
+        # is a miss, and the same fraction is tried again on the new estimate (up to 3 times)
+        plan = [("time", (i + rng.random()) / max(k_time, 1) * 0.97) for i in range(k_time)]
         plan += [("export", rng.random() * (t_wrote - t_last) * 1.05) for _ in range(k_export)]
+        est = t_last
         kills = identical = half = missed = same_bytes = temps = 0
-        for i, (kind, t) in enumerate(plan):
+        for i, (kind, x) in enumerate(plan):
             d = work / f"kill{i:02d}"
-            shutil.rmtree(d, ignore_errors=True)
-            d.mkdir()
-            r = Run([args.scenario, *outs], d)
-            if kind == "export":
-                t_ev = r.wait_line(lambda line: line.startswith(last), timeout=20 * wall)
-                killed = t_ev is not None and r.kill_at(t_ev + t)
-                t_kill = (t_ev or 0.0) + t
-            else:
-                killed, t_kill = r.kill_at(t), t
-            r.finish()
-            if not killed:
+            for attempt in range(3):
+                shutil.rmtree(d, ignore_errors=True)
+                d.mkdir()
+                r = Run([args.scenario, *outs], d)
+                if kind == "export":
+                    t_ev = r.wait_line(lambda line: line.startswith(last), timeout=20 * wall)
+                    killed = t_ev is not None and r.kill_at(t_ev + x)
+                    t_kill = (t_ev or 0.0) + x
+                else:
+                    t_kill = x * est
+                    killed = r.kill_at(t_kill)
+                r.finish()
+                if killed:
+                    break
                 missed += 1
-                print(f"kill {i:2d} ({kind}, {t_kill:.2f} s): missed, the run had ended (exit {r.proc.returncode})",
-                      flush=True)
+                t_end = next((t for t, line in r.lines if line.startswith(last)), None)
+                if t_end is not None:
+                    est = t_end
+                print(f"kill {i:2d} ({kind}, {t_kill:.2f} s): missed, the run had ended (exit {r.proc.returncode}); "
+                      f"run length estimate now {est:.1f} s", flush=True)
+            if not killed:
                 continue
             kills += 1
             phase = r.lines[-1][1][:60] if r.lines else "(no output yet)"
