@@ -7,7 +7,8 @@
    minute) and notes when each step and the export (audit, stage, report, plots) happen.
 2. ``--kills K`` times: starts the same run in a fresh folder and kills its process group
    with SIGKILL at a random moment — stratified over the reference run's duration, and
-   ``ceil(K/5)`` of them inside the export phase (a random delay after the last step's line).
+   ``ceil(K/5)`` of them inside the export phase (a random fraction of the export's length
+   after the last step's line).
    After each kill every file at a final path (stage, report, plots, manifest, checkpoints)
    is checked: it is absent or complete (the stage opens and has every frame, JSON parses,
    a PNG ends with its IEND chunk, a checkpoint's arrays load without pickle, every committed
@@ -238,8 +239,8 @@ def main() -> None:
         # from the latest run seen (machine load changes it): a run that ends before its kill moment
         # is a miss, and the same fraction is tried again on the new estimate (up to 3 times)
         plan = [("time", (i + rng.random()) / max(k_time, 1) * 0.97) for i in range(k_time)]
-        plan += [("export", rng.random() * (t_wrote - t_last) * 1.05) for _ in range(k_export)]
-        est = t_last
+        plan += [("export", rng.random()) for _ in range(k_export)]
+        est, est_export = t_last, t_wrote - t_last
         kills = identical = half = missed = same_bytes = temps = 0
         for i, (kind, x) in enumerate(plan):
             d = work / f"kill{i:02d}"
@@ -249,8 +250,8 @@ def main() -> None:
                 r = Run([args.scenario, *outs], d)
                 if kind == "export":
                     t_ev = r.wait_line(lambda line: line.startswith(last), timeout=20 * wall)
-                    killed = t_ev is not None and r.kill_at(t_ev + x)
-                    t_kill = (t_ev or 0.0) + x
+                    t_kill = (t_ev or 0.0) + x * est_export
+                    killed = t_ev is not None and r.kill_at(t_kill)
                 else:
                     t_kill = x * est
                     killed = r.kill_at(t_kill)
@@ -259,10 +260,13 @@ def main() -> None:
                     break
                 missed += 1
                 t_end = next((t for t, line in r.lines if line.startswith(last)), None)
+                t_out = next((t for t, line in r.lines if line.startswith("compose: wrote")), None)
                 if t_end is not None:
                     est = t_end
+                    if t_out is not None:
+                        est_export = t_out - t_end
                 print(f"kill {i:2d} ({kind}, {t_kill:.2f} s): missed, the run had ended (exit {r.proc.returncode}); "
-                      f"run length estimate now {est:.1f} s", flush=True)
+                      f"estimates now: steps {est:.1f} s, export {est_export:.2f} s", flush=True)
             if not killed:
                 continue
             kills += 1
