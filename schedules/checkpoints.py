@@ -224,6 +224,12 @@ def write_checkpoint(manifest: Manifest, name: str, data: dict) -> None:
            "npz_sha256": sha256_bytes(npz), "data": body}
     text = json.dumps(doc, allow_nan=True, separators=(",", ":")).encode("utf-8")
     steps = manifest.run_dir / "steps"
+    if f"{name}.json" in manifest.checkpoints or f"{name}.npz" in manifest.checkpoints:
+        # overwriting a committed checkpoint: uncommit it first, or a kill between the file
+        # writes and the commit would leave the manifest naming the old hashes of new files
+        manifest.checkpoints.pop(f"{name}.json", None)
+        manifest.checkpoints.pop(f"{name}.npz", None)
+        manifest.save()
     atomic_write(steps / f"{name}.npz", npz)
     atomic_write(steps / f"{name}.json", text)
     manifest.checkpoints[f"{name}.npz"] = sha256_bytes(npz)

@@ -98,18 +98,12 @@ def goal_verdict(goals: dict, couplings: dict) -> dict:
 
 def run_scenario(name_or_file: str, *, out: str | None = None, report: str | None = None, jobs: int = 1,
                  resume: bool = False, run_dir: str | None = None, fps: float = 30.0, fail_capped: bool = False,
-                 scheduler: str | None = None, store: str | None = None, log=sys.stderr) -> dict:
+                 scheduler: str | None = None, store: str | None = None, log=None) -> dict:
     """Run a scenario end to end; returns the report dict.  Raises ComposeError on failure."""
-    from scenegraph.audit import audit_motion
-    from scenegraph.scene import build_scene
-    from scenegraph.usd_export import CharacterTrack, Marker, export_usd
-
     from .cli_scenario import check_scenario
     from .compiler import compile_schedule
-    from .checkpoints import RunLock, atomic_write_text
-    from .executor import run_fingerprint, run_schedule
-    from .run_audit import allowed_contacts, audit_run_stage
 
+    log = sys.stderr if log is None else log  # bound at call time (a test may swap sys.stderr)
     t0 = time.perf_counter()
     if jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {jobs}")
@@ -164,6 +158,7 @@ def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, re
 
     from .checkpoints import RunLock, atomic_write_text
     from .executor import run_fingerprint
+    from .run_audit import allowed_contacts, audit_run_stage
 
     with RunLock(rdir):  # one writer per run folder, held until the report is written
         scene = build_scene(scn)
@@ -303,11 +298,42 @@ def _json_default(o):
     raise TypeError(type(o).__name__)
 
 
+def resume_command(args) -> str:
+    """The ``compose run … --resume`` command line that continues the run of ``args``."""
+    import shlex
+    words = ["compose", "run", args.file, "--resume"]
+    for flag, value in (("--run-dir", args.run_dir), ("-o", args.output), ("--report", args.report)):
+        if value is not None:
+            words += [flag, str(value)]
+    if args.jobs != 1:
+        words += ["--jobs", str(args.jobs)]
+    if args.fps != 30.0:
+        words += ["--fps", f"{args.fps:g}"]
+    if args.fail_capped:
+        words.append("--fail-capped")
+    if getattr(args, "scheduler", None):
+        words += ["--scheduler", str(args.scheduler)]
+    return " ".join(shlex.quote(w) for w in words)
+
+
 def _run(args) -> int:
-    rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
-                       run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped,
-                       scheduler=getattr(args, "scheduler", None),
-                       store="" if getattr(args, "no_store", False) else getattr(args, "store", None))
+    """``compose run``; SIGINT/SIGTERM stop it with one line naming the step and the
+    ``--resume`` command (exit 130/143), the finished steps' checkpoints kept."""
+    from . import interrupts
+    with interrupts.catching_interrupts():
+        try:
+            rep = run_scenario(args.file, out=args.output, report=args.report, jobs=args.jobs, resume=args.resume,
+                               run_dir=args.run_dir, fps=args.fps, fail_capped=args.fail_capped,
+                               scheduler=getattr(args, "scheduler", None),
+                               store="" if getattr(args, "no_store", False) else getattr(args, "store", None))
+        except interrupts.RunInterrupted as exc:
+            print(f"compose: {exc.message}; resume with: {resume_command(args)}", file=sys.stderr, flush=True)
+            return exc.exit_code
+        except KeyboardInterrupt:  # outside the steps: loading, or the audit and export after the last step
+            signum = interrupts.requested() or 2
+            print(f"compose: interrupted during {interrupts.phase()}; resume with: {resume_command(args)}",
+                  file=sys.stderr, flush=True)
+            return 128 + signum
     # exit 0: every physics audit passes and every goal and coupling expected to hold holds
     # (walk_to, reach, footprints, couplings, the winners' tackle/avoid goals); in adversarial
     # scenes the goals of the side that does not plan last are expected to fail and do not decide it

@@ -24,6 +24,11 @@ Semantics (kept identical for every ``--jobs``):
   cap with every hard constraint satisfied is kept with a warning (unless ``fail_capped``),
   and a *timing* step that did not converge or violates a constraint is discarded (the full
   step after it starts from the state before it).  The run folder keeps every finished Step.
+* SIGINT/SIGTERM stop the run at once (:mod:`schedules.interrupts`): the interrupted step is
+  not checkpointed, :class:`RunInterrupted` names it (exit code 130/143).  Any other exception
+  raised inside a step (transcription, solver, a worker) becomes :class:`StepFailed`
+  ``step N (<name>) failed: <ExcType>: <msg>`` (exit 1); its traceback is printed only under
+  ``COMPOSE_DEBUG=1``.  Either way the finished steps' checkpoints are kept.
 
 Test hook: ``COMPOSE_STOP_AFTER=N`` stops the process with exit code ``STOP_EXIT`` right
 after the N-th newly solved Step has been written; ``COMPOSE_MAX_ITER=N`` caps IPOPT
@@ -49,12 +54,14 @@ from scenegraph.problem import solve
 from scenegraph.scene import Scene
 from scenegraph.synthesis import presolve_kinematics
 
+from . import interrupts
 from .checkpoints import Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
 from .lower import iteration_cap, lower, lower_joint
 from .step import FULL, Schedule, Step
+from .interrupts import RunInterrupted, catching_interrupts, crash_message, debug_enabled, format_traceback
 
 __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT", "VIOLATION_TOL",
-           "run_fingerprint"]
+           "run_fingerprint", "RunInterrupted"]
 
 STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
@@ -142,13 +149,13 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
     """
     out: dict = {"step": step.id, "characters": {}}
     cur = scene
-    lowered: dict = {}
     pre_infos: dict = {}
     for who in step.characters:
         pre_info = None
         if who in presolve:
             st = cur.character(who)
             pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=cur.ground)
+            interrupts.check()
             pre_info = {"status": pre.status, "success": pre.success, "iterations": pre.iterations,
                         "seconds": pre.seconds}
             if pre.success:
@@ -168,13 +175,16 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
             # computation"; monotone: converged in 14 iterations)
             sp = replace(sp, contact_guess=contacts[who],
                          ipopt_options=sp.ipopt_options + WARM_IPOPT)
-        cur = _write_back(cur, who, sp, mask, solve(sp), pre_info, out)
+        res = solve(sp)
+        interrupts.check()  # CasADi swallows a KeyboardInterrupt raised inside IPOPT's callbacks
+        cur = _write_back(cur, who, sp, mask, res, pre_info, out)
     joint = lower_joint(cur, step)
     if joint is not None:
         (a, b), sps = joint.characters, {}
         for who in joint.characters:
             sps[who] = lower(cur, step, who, max_iter=_max_iter(iteration_cap(step)))
         jr = solve_joint(sps[a][0], sps[b][0], joint.coupling)
+        interrupts.check()
         for who, res in zip((a, b), jr.results):
             res = replace(res, violations={**res.violations, f"coupling:{joint.coupling.name}":
                                            float(jr.violations.get("coupling", 0.0))})
@@ -209,6 +219,7 @@ def presolve_character(scene: Scene, who: str) -> dict:
     """Make a character's initial motion satisfy its footsteps and the ground (no dynamics)."""
     st = scene.character(who)
     pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground)
+    interrupts.check()
     return {"step": f"presolve:{who}", "ctrl": np.asarray(pre.motion.ctrl, float),
             "warp": np.asarray(pre.motion.warp, float), "status": pre.status, "success": bool(pre.success),
             "iterations": pre.iterations, "seconds": pre.seconds,
@@ -286,6 +297,26 @@ def _sum_timings(parts: list[dict]) -> dict:
 
 
 
+def _guarded(at: tuple[int, str], run_dir: Path, log, fn):
+    """``fn()``; an unexpected exception (not a :class:`ComposeError`) becomes the failure of
+    step ``at`` — ``step N (<name>) failed: <ExcType>: <msg>`` on one line, exit code 1 — with
+    the traceback on ``log`` only under ``COMPOSE_DEBUG=1`` (``compose --debug``).  A stop
+    request recorded while ``fn`` ran (see :mod:`schedules.interrupts`) raises
+    ``KeyboardInterrupt``, so an interrupted solve is never checkpointed."""
+    try:
+        out = fn()
+    except (ComposeError, KeyboardInterrupt):
+        raise
+    except Exception as exc:
+        interrupts.check()  # an exception caused by the interrupt is the interrupt
+        if debug_enabled():
+            print(format_traceback(exc), end="", file=log, flush=True)
+        raise StepFailed(f"step {at[0]} ({at[1]}) failed: {crash_message(exc)}; finished steps are kept in "
+                         f"{run_dir}") from exc
+    interrupts.check()
+    return out
+
+
 def _fmt_s(s: float) -> str:
     s = max(0.0, s)
     return f"{int(s // 60)}m{int(s % 60):02d}s" if s >= 60 else f"{s:.0f}s"
@@ -293,10 +324,21 @@ def _fmt_s(s: float) -> str:
 
 # --- the run --------------------------------------------------------------------------------
 
+def _remove_temporaries(run_dir: Path) -> None:
+    """Temporary files of atomic writes cut short by a SIGKILL (never at a final path; the
+    caller holds the run lock, so no live writer owns them)."""
+    for folder in (run_dir, run_dir / "steps"):
+        if folder.is_dir():
+            for p in folder.glob(".*.tmp"):
+                if p.is_file():
+                    p.unlink()
+
+
 def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> tuple[Manifest, dict | None]:
     """Create or check the run folder; returns (manifest to commit new checkpoints to, the
     manifest data read on resume or None).  Without resume, old checkpoints are removed."""
     man = run_dir / "manifest.json"
+    _remove_temporaries(run_dir)
     if resume and man.exists():
         old = Manifest.load(run_dir)
         if old.get("format") != FORMAT:
@@ -309,13 +351,15 @@ def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> tuple[Mani
                              "remove it or run without --resume", Location(str(man)))
         committed = {k: v for k, v in old.get("checkpoints", {}).items()}
         return Manifest(run_dir, FORMAT, fingerprint, committed), old
+    # commit the empty manifest first, then remove the old files: a kill in between must not
+    # leave a manifest naming checkpoints that are gone (--resume would refuse the folder)
+    manifest = Manifest(run_dir, FORMAT, fingerprint)
+    manifest.save()
     steps = run_dir / "steps"
     if steps.is_dir():
         for pattern in ("*.pkl", "*.npz", "*.json", ".*.tmp"):
             for p in steps.glob(pattern):
                 p.unlink()
-    manifest = Manifest(run_dir, FORMAT, fingerprint)
-    manifest.save()
     return manifest, None
 
 
@@ -331,7 +375,7 @@ def _resumed(old: dict | None, run_dir: Path, name: str, log) -> dict | None:
 
 
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
-                 jobs: int = 1, resume: bool = False, fail_capped: bool = False, log=sys.stderr) -> RunResult:
+                 jobs: int = 1, resume: bool = False, fail_capped: bool = False, log=None) -> RunResult:
     """Run every Step of ``schedule`` over ``scene``; see the module docstring.
 
     A full step must end with every hard constraint satisfied.  One that reached its
@@ -341,8 +385,9 @@ def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike
     problems (0.1–0.2 % per iterate for hundreds of iterates), and the thesis cuts the moves
     of decreasing-horizon and coupled schedules short on purpose (coupled full steps are
     capped at COUPLED_FULL_MAX_ITER)."""
+    log = sys.stderr if log is None else log  # bound at call time (a test may swap sys.stderr)
     run_dir = Path(run_dir)
-    with RunLock(run_dir):
+    with catching_interrupts(), RunLock(run_dir):
         return _run_locked(scene, schedule, run_dir, fingerprint, jobs, resume, fail_capped, log)
 
 
@@ -364,8 +409,11 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
     resumed = 0
     done = 0
     solve_seconds = 0.0
-    pool = ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else None
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=interrupts.ignore_interrupts_in_worker) \
+        if jobs > 1 else None
     presolved: dict = {}
+    finished = False
+    at = (0, "start")  # (1-based step number, name) being worked on: named by an interrupt or a crash
     try:
         # 0. one kinematic pre-solve per character, before its first step (checkpointed too)
         names = list(first_of)
@@ -376,11 +424,13 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                 loaded[who] = d
             else:
                 todo_pre.append(who)
-        if pool is not None and len(todo_pre) > 1:
-            futs = {who: pool.submit(presolve_character, scene, who) for who in todo_pre}
-            fresh = {who: futs[who].result() for who in todo_pre}
-        else:
-            fresh = {who: presolve_character(scene, who) for who in todo_pre}
+        futs = {who: pool.submit(presolve_character, scene, who) for who in todo_pre} \
+            if pool is not None and len(todo_pre) > 1 else {}
+        fresh = {}
+        for who in todo_pre:
+            at = (0, f"presolve {who}")
+            fresh[who] = _guarded(at, run_dir, log, futs[who].result if who in futs
+                                  else (lambda who=who: presolve_character(scene, who)))
         for who in names:
             d = loaded.get(who) or fresh[who]
             if who in fresh:
@@ -419,7 +469,8 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                 pending = [(s, (lambda s=s: solve_step(snapshot, s, pre[s.id], contact))) for s in todo]
             for s, get in pending:
                 t0 = time.perf_counter()
-                d = get()
+                at = (index[s.id] + 1, s.id)
+                d = _guarded(at, run_dir, log, get)
                 d["fingerprint"] = fingerprint
                 results[s.id] = d
                 rec = _record(index[s.id], s, d)
@@ -469,8 +520,15 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                 if s.kind == FULL:
                     for who, c in d["characters"].items():
                         contact[who] = _merge_contacts(contact.get(who), c["contact_forces"], c.get("window"))
+        finished = True
+        interrupts.set_phase(f"the audit and export (all {n} steps are checkpointed)")
+    except KeyboardInterrupt:  # SIGINT/SIGTERM (interrupts.catching_interrupts): the step's result is not kept
+        raise RunInterrupted(at[0], at[1], interrupts.requested()) from None
     finally:
         if pool is not None:
+            if not finished:  # do not wait minutes for workers' solves whose results are not wanted
+                for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                    proc.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
     return RunResult(scene, [records[i] for i in sorted(records)], time.perf_counter() - t_start, contact, resumed,
                      presolved)

