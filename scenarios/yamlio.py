@@ -125,6 +125,9 @@ def parse_yaml(text: str, file: str | None = None) -> tuple[Any, Positions]:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         loc = _loc(file, mark) if mark else Location(file, 1, 1)
+        if "nesting depth" in str(exc.problem):  # libyaml >= 0.2.5 stops at its own depth (1000),
+            # scanning ahead before _check_events sees the 65th level: the same error, located there
+            raise InputError(f"nesting deeper than {MAX_DEPTH} levels (a scenario needs about 6)", loc) from None
         raise InputError(f"invalid YAML: {exc.problem or exc.context}", loc) from None
     except yaml.YAMLError as exc:  # a ReaderError: a character YAML does not allow (NUL, …)
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
