@@ -26,6 +26,7 @@ import io
 import json
 import os
 import re
+import zipfile
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
@@ -287,7 +288,7 @@ def read_checkpoint(manifest: Manifest | dict, run_dir: Path, name: str) -> dict
     try:
         with np.load(io.BytesIO(got[zname]), allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (ValueError, OSError, EOFError) as exc:  # object arrays (pickles) raise ValueError
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, KeyError) as exc:  # object arrays (pickles): ValueError
         raise CheckpointError(f"unreadable arrays: {exc}", zpath) from None
     for k, a in arrays.items():
         if a.dtype.kind not in "biuf":

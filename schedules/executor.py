@@ -55,7 +55,7 @@ from scenegraph.scene import Scene
 from scenegraph.synthesis import presolve_kinematics
 
 from . import interrupts
-from .checkpoints import Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
+from .checkpoints import CheckpointError, Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
 from .lower import iteration_cap, lower, lower_joint
 from .step import FULL, Schedule, Step
 from .interrupts import RunInterrupted, catching_interrupts, crash_message, debug_enabled, format_traceback
@@ -364,10 +364,21 @@ def prepare_run_dir(run_dir: Path, fingerprint: str, resume: bool) -> tuple[Mani
 
 
 def _resumed(old: dict | None, run_dir: Path, name: str, log) -> dict | None:
-    """A verified checkpoint of a resumed run, or None (not resuming, or not committed)."""
+    """A verified checkpoint of a resumed run, or None (not resuming, not committed, or rejected).
+
+    A committed checkpoint that fails its check (truncated, edited, foreign, or not data-only:
+    :class:`CheckpointError`) is never loaded: it is reported and its step is solved again, and
+    so is every later step (their checkpoints are dropped from ``old``, which is mutated), since
+    they were computed from a result this run can no longer vouch for."""
     if old is None:
         return None
-    d = read_checkpoint(old, run_dir, name)
+    try:
+        d = read_checkpoint(old, run_dir, name)
+    except CheckpointError as exc:
+        print(f"    checkpoint rejected, never loaded: {exc}; solving its step and every later step again",
+              file=log, flush=True)
+        old["checkpoints"] = {}
+        return None
     if d is None and name in checkpoint_names(run_dir):
         print(f"    {run_dir / 'steps' / name}.json was not committed to the manifest (interrupted while "
               "writing): solving its step again", file=log, flush=True)

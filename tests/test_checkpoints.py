@@ -239,13 +239,68 @@ def test_resume_replays_verified_checkpoints(tmp_path, fake_run):
     assert b.resumed == len(schedule)
     for c in a.scene.characters:
         np.testing.assert_array_equal(c.motion.ctrl, b.scene.character(c.name).motion.ctrl)
-    # an edited checkpoint stops the resume with an error naming it; nothing was solved
+    # an edited checkpoint is rejected (never loaded), named, and its step and the later ones re-solved
     f = tmp_path / "r" / "steps" / "002.json"
     f.write_text(f.read_text().replace('"energy":10.0', '"energy":1.0'))
-    with pytest.raises(InputError) as e:
-        ex.run_schedule(scene, schedule, run_dir=tmp_path / "r", fingerprint="fp", resume=True, log=log)
-    assert str(f) in str(e.value)
-    assert len(calls) == n
+    log = io.StringIO()
+    c = ex.run_schedule(scene, schedule, run_dir=tmp_path / "r", fingerprint="fp", resume=True, log=log)
+    assert str(f) in log.getvalue() and "never loaded" in log.getvalue()
+    assert calls[n:] == [s.id for s in schedule.order()[1:]]
+    for ch in a.scene.characters:
+        np.testing.assert_array_equal(ch.motion.ctrl, c.scene.character(ch.name).motion.ctrl)
+
+
+def _recommit(run_dir, name, npz_bytes=None, json_text=None):
+    """Rewrite a checkpoint's files and make the manifest (and the JSON's own npz hash) agree, as
+    someone crafting a run folder would: only the content checks are left to catch it."""
+    import hashlib
+    steps = run_dir / "steps"
+    if npz_bytes is not None:
+        (steps / f"{name}.npz").write_bytes(npz_bytes)
+        doc = json.loads((steps / f"{name}.json").read_text())
+        doc["npz_sha256"] = hashlib.sha256(npz_bytes).hexdigest()
+        (steps / f"{name}.json").write_text(json.dumps(doc))
+    if json_text is not None:
+        (steps / f"{name}.json").write_text(json_text)
+    man = json.loads((run_dir / "manifest.json").read_text())
+    for ext in ("json", "npz"):
+        man["checkpoints"][f"{name}.{ext}"] = hashlib.sha256((steps / f"{name}.{ext}").read_bytes()).hexdigest()
+    (run_dir / "manifest.json").write_text(json.dumps(man))
+
+
+@pytest.mark.parametrize("craft", ["pickle_payload", "pickle_file", "truncated", "checksum_mismatch", "foreign_json"])
+def test_crafted_checkpoint_is_rejected_and_its_step_solved_again(tmp_path, fake_run, craft):
+    import pickle
+    scene, schedule, calls = fake_run
+    a = ex.run_schedule(scene, schedule, run_dir=tmp_path, fingerprint="fp", log=io.StringIO())
+    n = len(calls)
+    npz = tmp_path / "steps" / "002.npz"
+    if craft == "pickle_payload":  # an object array: np.load would unpickle it if allowed to
+        buf = io.BytesIO()
+        np.savez(buf, payload=np.array([{"__reduce__": "os.system"}], dtype=object))
+        _recommit(tmp_path, "002", npz_bytes=buf.getvalue())
+    elif craft == "pickle_file":  # a pickle where the arrays belong, with every hash made to agree
+        _recommit(tmp_path, "002", npz_bytes=pickle.dumps({"ctrl": [1, 2, 3]}))
+    elif craft == "truncated":  # cut in half, hashes made to agree: the archive itself is broken
+        _recommit(tmp_path, "002", npz_bytes=npz.read_bytes()[: npz.stat().st_size // 2])
+    elif craft == "checksum_mismatch":  # one byte changed, the manifest left alone
+        raw = bytearray(npz.read_bytes())
+        raw[len(raw) // 2] ^= 0xFF
+        npz.write_bytes(bytes(raw))
+    else:  # a well-formed checkpoint of another step and run
+        doc = json.loads((tmp_path / "steps" / "002.json").read_text())
+        doc["fingerprint"] = "another-run"
+        _recommit(tmp_path, "002", json_text=json.dumps(doc))
+    log = io.StringIO()
+    b = ex.run_schedule(scene, schedule, run_dir=tmp_path, fingerprint="fp", resume=True, log=log)
+    assert "002" in log.getvalue() and "never loaded" in log.getvalue()
+    assert calls[n:] == [s.id for s in schedule.order()[1:]], "the rejected step and the later ones are solved again"
+    assert b.resumed == 1
+    for ch in a.scene.characters:
+        np.testing.assert_array_equal(ch.motion.ctrl, b.scene.character(ch.name).motion.ctrl)
+    # and the folder is whole again: a second resume solves nothing
+    ex.run_schedule(scene, schedule, run_dir=tmp_path, fingerprint="fp", resume=True, log=io.StringIO())
+    assert len(calls) == n + len(schedule) - 1
 
 
 def test_uncommitted_checkpoint_is_solved_again(tmp_path, fake_run):
