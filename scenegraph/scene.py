@@ -92,10 +92,10 @@ class Scene:
     duration_bounds: tuple[float, float] | None = None  # s, [min, max] of the whole motion with timing: free
 
     def character(self, name: str) -> CharacterState:
-        for c in self.characters:
-            if c.name == name:
-                return c
-        raise KeyError(name)
+        found = next((c for c in self.characters if c.name == name), None)
+        if found is None:
+            raise KeyError(name)
+        return found
 
     @property
     def names(self) -> tuple[str, ...]:

@@ -34,7 +34,7 @@ from pathlib import Path
 from scenarios.errors import InputError, Location
 
 from .checkpoints import RunLock, write_checkpoint
-from .executor import (FULL, RunResult, StepFailed, _fmt_s, _record, _resumed, prepare_run_dir)
+from .executor import (RunResult, StepFailed, _fmt_s, _record, _resumed, _resumed_step, prepare_run_dir)
 from .graph_tasks import apply_results, presolve_task_key, schedule_graph, step_task_key
 from .step import Schedule
 
@@ -189,11 +189,8 @@ def _run(scene, schedule, sched, run_dir, fingerprint, resume, fail_capped, stor
                                  Location(str(run_dir / "steps" / f"000_{who}.json")))
             given[presolve_task_key(who)] = d
     for s in order:
-        f = run_dir / "steps" / f"{index[s.id] + 1:03d}.json"
-        d = _resumed(old, run_dir, f.stem, log)
+        d = _resumed_step(old, run_dir, index[s.id] + 1, s.id, fingerprint, log)
         if d is not None:
-            if d.get("step") != s.id or d.get("fingerprint") != fingerprint:
-                raise InputError(f"--resume: checkpoint does not belong to step {s.id!r}", Location(str(f)))
             given[step_task_key(s.id)] = d
     dsk = schedule_graph(scene, schedule, store=str(store) if store else None, fail_capped=fail_capped,
                          given=given)

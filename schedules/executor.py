@@ -385,6 +385,17 @@ def _resumed(old: dict | None, run_dir: Path, name: str, log) -> dict | None:
     return d
 
 
+def _resumed_step(old: dict | None, run_dir: Path, number: int, step_id: str, fingerprint: str,
+                  log) -> dict | None:
+    """The verified checkpoint of step ``number`` (1-based) on resume, or None; a checkpoint of
+    another step or run is refused with its location."""
+    f = run_dir / "steps" / f"{number:03d}.json"
+    d = _resumed(old, run_dir, f.stem, log)
+    if d is not None and (d.get("step") != step_id or d.get("fingerprint") != fingerprint):
+        raise InputError(f"--resume: checkpoint does not belong to step {step_id!r}", Location(str(f)))
+    return d
+
+
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
                  jobs: int = 1, resume: bool = False, fail_capped: bool = False, log=None) -> RunResult:
     """Run every Step of ``schedule`` over ``scene``; see the module docstring.
@@ -461,15 +472,13 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
             results: dict[str, dict] = {}
             todo = []
             for s in gen:
-                f = run_dir / "steps" / f"{index[s.id] + 1:03d}.json"
-                d = _resumed(old, run_dir, f.stem, log)
+                d = _resumed_step(old, run_dir, index[s.id] + 1, s.id, fingerprint, log)
                 if d is not None:
-                    if d.get("step") != s.id or d.get("fingerprint") != fingerprint:
-                        raise InputError(f"--resume: checkpoint does not belong to step {s.id!r}", Location(str(f)))
                     results[s.id] = d
                     resumed += 1
                     done += 1
-                    print(f"[{index[s.id] + 1}/{n}] {s.id}: resumed from {f}", file=log, flush=True)
+                    print(f"[{index[s.id] + 1}/{n}] {s.id}: resumed from "
+                          f"{run_dir / 'steps' / f'{index[s.id] + 1:03d}.json'}", file=log, flush=True)
                 else:
                     todo.append(s)
             pre = {s.id: () for s in todo}  # kinematic pre-solves ran before the first generation
