@@ -155,8 +155,18 @@ def _png_complete(data: bytes) -> bool:
     return data.startswith(b"\x89PNG\r\n\x1a\n") and data[-12:-8] == b"\x00\x00\x00\x00" and data[-8:-4] == b"IEND"
 
 
-def half_written(folder: Path, ref_frames: dict[str, int]) -> list[str]:
-    """Files at final paths of a killed run's folder that are not complete (see the module doc)."""
+def usd_frames(folder: Path) -> dict[Path, dict[str, int]]:
+    """Frames per joint track of every USD stage under ``folder`` (the output stage and the run's
+    120 Hz audit stage), by path relative to ``folder``."""
+    return {p.relative_to(folder): {k: v.shape[0] for k, v in joint_transforms(p).items()}
+            for p in sorted(folder.rglob("*.usd[acz]")) if not p.name.startswith(".")}
+
+
+def half_written(folder: Path, ref_frames: dict[Path, dict[str, int]]) -> list[str]:
+    """Files at final paths of a killed run's folder that are not complete (see the module doc).
+
+    ``ref_frames``: :func:`usd_frames` of the uninterrupted run; a stage must have the frames of
+    the same stage there (a stage the reference lacks must read back whole)."""
     from schedules.checkpoints import CheckpointError, read_all
     bad = []
     for p in sorted(folder.rglob("*")):
@@ -164,9 +174,10 @@ def half_written(folder: Path, ref_frames: dict[str, int]) -> list[str]:
             continue  # temporaries (".name.XXXX.tmp") and the lock are not final paths
         try:
             if p.suffix in (".usda", ".usdc", ".usdz"):
-                got = joint_transforms(p)
-                if {k: v.shape[0] for k, v in got.items()} != ref_frames:
-                    raise ValueError(f"frames {[v.shape[0] for v in got.values()]}")
+                got = {k: v.shape[0] for k, v in joint_transforms(p).items()}
+                want = ref_frames.get(p.relative_to(folder))
+                if want is not None and got != want:
+                    raise ValueError(f"frames {sorted(got.values())} where the reference has {sorted(want.values())}")
             elif p.suffix == ".json":
                 doc = json.loads(p.read_text(encoding="utf-8"))
                 if p.parent.name == "steps" and not {"format", "fingerprint", "name", "npz_sha256", "data"} <= set(doc):
@@ -227,10 +238,10 @@ def main() -> None:
         t_last = steps[-1][0]
         t_wrote = next(t for t, line in ref.lines if line.startswith("compose: wrote"))
         ref_tf = joint_transforms(d / "out.usda")
-        ref_frames = {k: v.shape[0] for k, v in ref_tf.items()}
+        ref_frames = usd_frames(d)
         ref_bytes = (d / "out.usda").read_bytes()
         print(f"reference: exit {ref_rc}, {wall:.1f} s wall; last step line at {t_last:.1f} s, outputs written at "
-              f"{t_wrote:.1f} s (export {t_wrote - t_last:.2f} s); {sum(ref_frames.values())} frames", flush=True)
+              f"{t_wrote:.1f} s (export {t_wrote - t_last:.2f} s); {sum(v.shape[0] for v in ref_tf.values())} frames", flush=True)
 
         # 2. kills
         k_export = math.ceil(args.kills / 5) if args.kills else 0
