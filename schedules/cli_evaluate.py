@@ -27,11 +27,12 @@ BODIES = ("adult_male", "adult_female", "child")
 
 def find_training_clip(name: str, test_clip: Path) -> Path | None:
     """The style's training clip (provenance ``clip``, a file name) beside the test clip, in
-    $COMPOSE_SHARED_MOCAP, or in ../shared/mocap relative to the working directory or the repo."""
-    roots = [test_clip.parent]
-    if os.environ.get("COMPOSE_SHARED_MOCAP"):
-        roots.append(Path(os.environ["COMPOSE_SHARED_MOCAP"]))
-    roots += [Path.cwd().parent / "shared" / "mocap", Path(__file__).resolve().parents[2] / "shared" / "mocap"]
+    $COMPOSE_SHARED_MOCAP, in the bundled scenarios/clips/, or in ../shared/mocap relative to
+    the working directory or the repo."""
+    env = os.environ.get("COMPOSE_SHARED_MOCAP")
+    repo = Path(__file__).resolve().parents[1]
+    roots = [test_clip.parent, *([Path(env)] if env else []), repo / "scenarios" / "clips",
+             Path.cwd().parent / "shared" / "mocap", repo.parent / "shared" / "mocap"]
     for r in roots:
         if (r / Path(name).name).is_file():
             return r / Path(name).name
