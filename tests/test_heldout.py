@@ -184,7 +184,7 @@ def test_end_to_end_on_a_short_slice(tmp_path):
     if not BRISK.is_file():
         pytest.skip(f"shared mocap clip {BRISK} absent (set COMPOSE_SHARED_MOCAP)")
     report = tmp_path / "brisk.json"
-    rc = _run(["evaluate-style", str(WALK_STYLE), "--test", str(BRISK), "--frames", "2:140",
+    rc = _run(["evaluate-style", str(WALK_STYLE), "--test", str(BRISK), "--frames", "30:140",
                "--max-iter", "40", "--report", str(report)])
     assert rc == 0
     rep = json.loads(report.read_text())
