@@ -61,17 +61,24 @@ def _stance_mask(t: np.ndarray, steps) -> np.ndarray:
     return m
 
 
-def _strides(steps, t_first: float) -> list[tuple[float, float]]:
-    """Stride windows between foot strikes of one foot (the foot giving more of them); a
-    footstep that starts at the trial's first frame is no strike."""
+def _strides(steps, t_first: float) -> dict[str, list[tuple[float, float]]]:
+    """Stride windows per foot ("l", "r") between that foot's strikes; a footstep that starts
+    at the trial's first frame is no strike (the foot may have been down before)."""
     from scenegraph.heldout import stride_windows
 
-    best: list = []
-    for foot in ("l", "r"):
-        w = stride_windows([s.t0 for s in steps if s.foot == foot and s.t0 > t_first + 1e-6])
-        if len(w) > len(best):
-            best = w
-    return best
+    return {foot: stride_windows([s.t0 for s in steps if s.foot == foot and s.t0 > t_first + 1e-6])
+            for foot in ("l", "r")}
+
+
+def _noise_floor(t, q, by_foot) -> dict[str, float] | None:
+    """The noise floor per foot's strides (scenegraph.heldout.noise_floor_deg), pooled as the
+    RMS over the feet that have at least two strides; None if neither has."""
+    from scenegraph.heldout import noise_floor_deg
+
+    parts = [nf for nf in (noise_floor_deg(t, q, w) for w in by_foot.values()) if nf is not None]
+    if not parts:
+        return None
+    return {g: float(np.sqrt(np.mean([p[g] ** 2 for p in parts]))) for g in parts[0]}
 
 
 def _training_features(style, test_clip: Path) -> tuple[dict | None, str | None]:
@@ -162,7 +169,8 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     inside = (t >= max(m.start for m in motions.values()) - 1e-9) & (t <= min(m.end for m in motions.values()) + 1e-9)
     tt, qr = t[inside], q_real[inside]
     stance = _stance_mask(tt, steps)
-    windows = _strides(steps, t0)
+    by_foot = _strides(steps, t0)
+    windows = sorted(by_foot["l"] + by_foot["r"])  # the bootstrap's units: every stride of either foot
     real_feat = H.style_features(tt, qr, stance)
     variants, per_stride = {}, {}
     for name in VARIANTS:
@@ -185,8 +193,9 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         paired[f"learned-{other}"] = {
             g: H.bootstrap_mean_ci(np.asarray(per_stride["learned"][g]) - np.asarray(per_stride[other][g]))
             for g in H.JOINT_GROUPS}
-    if len(windows) < 2:
-        skipped.append(f"noise floor: {len(windows)} complete stride(s) in the trial, need 2")
+    noise = _noise_floor(tt, qr, by_foot)
+    if noise is None:
+        skipped.append("noise floor: no foot has two complete strides in the trial")
     if len(windows) < 3:
         skipped.append(f"bootstrap: only {len(windows)} stride(s); the intervals are not meaningful")
     skipped.append("plots (joint curves per group, ghost strips) are not written")
@@ -198,7 +207,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "test": {"file": str(test_path), "frames": list(clip.frame_range), "body": body, "frames_used": int(len(tt)),
                  "fps": float(clip.fps), "duration_s": t1 - t0,
                  "footsteps": [{"foot": s.foot, "t0": s.t0, "t1": s.t1, "position": list(s.position)} for s in steps],
-                 "strides": [list(w) for w in windows]},
+                 "strides": {f: [list(w) for w in ws] for f, ws in by_foot.items()}},
         "alignment": "by time: every variant plants the trial's own footsteps at the trial's times, so its "
                      "footfalls are the trial's",
         "initial_motion": example_src,
@@ -206,7 +215,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "groups": {g: [ch.dof_names[i] for i in H.group_indices(g)] for g in H.JOINT_GROUPS},
         "real": {"features": real_feat},
         "training": train,
-        "noise_floor_deg": H.noise_floor_deg(tt, qr, windows),
+        "noise_floor_deg": noise,
         "variants": variants,
         "paired_bootstrap_deg": paired,
         "skipped": skipped,

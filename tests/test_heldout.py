@@ -196,3 +196,19 @@ def test_end_to_end_on_a_short_slice(tmp_path):
         assert "root_residual_rms" in v["audit"]
     # the kinematic answer has no contact forces: its root residual is the price of being kinematic
     assert rep["variants"]["kinematic"]["audit"]["root_residual_rel"] > rep["variants"]["learned"]["audit"]["root_residual_rel"]
+
+
+def test_strides_per_foot_and_pooled_noise_floor():
+    from scenegraph.footsteps import Footstep
+    from schedules.cli_evaluate import _noise_floor, _strides
+
+    steps = [Footstep("l", (0.0, 0.0), 0.0, 0.3), Footstep("r", (0.5, 0.0), 0.5, 0.8),
+             Footstep("l", (1.0, 0.0), 1.0, 1.3), Footstep("r", (1.5, 0.0), 1.5, 1.8),
+             Footstep("l", (2.0, 0.0), 2.0, 2.3), Footstep("r", (2.5, 0.0), 2.5, 2.8)]
+    by_foot = _strides(steps, 0.0)  # the left step at the first frame is no strike
+    assert by_foot == {"l": [(1.0, 2.0)], "r": [(0.5, 1.5), (1.5, 2.5)]}
+    t, q, _ = _gait(T=301, dur=3.0)
+    q[t >= 1.5, _col("elbow_flex_l")] += np.radians(2.0)
+    nf = _noise_floor(t, q, by_foot)  # only the right foot has two strides
+    assert nf["arms"] > 0.3 and nf == pytest.approx(H.noise_floor_deg(t, q, by_foot["r"]))
+    assert _noise_floor(t, q, {"l": [(1.0, 2.0)], "r": []}) is None
