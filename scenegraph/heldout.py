@@ -28,7 +28,7 @@ def group_indices(group: str) -> np.ndarray:
     """Column indices into a full ``q`` (root first) of a joint group's DOFs (root excluded).
 
     legs: hip, knee, ankle, toe; pelvis_trunk: waist, chest, neck (the pelvis's own rotation
-    is the root, reported by :func:`root_path_error_m`'s neighbours in the features); arms:
+    is the root's, read by the pelvis features of :func:`style_features`); arms:
     shoulder, elbow, wrist; all: every joint DOF."""
     pre = {"legs": _LEGS, "pelvis_trunk": _TRUNK, "arms": _ARMS, "all": ("",)}.get(group)
     if pre is None:

@@ -142,7 +142,7 @@ BRISK = Path(os.environ.get("COMPOSE_SHARED_MOCAP", ROOT.parent / "shared" / "mo
 
 
 @pytest.mark.parametrize("case", ["missing_clip", "bad_frames", "unknown_body", "no_provenance", "truncated",
-                                  "frames_outside"])
+                                  "frames_outside", "empty_clip", "bad_style_field", "bad_max_iter", "report_not_json"])
 def test_bad_inputs_exit_2_and_write_nothing(case, tmp_path, capsys):
     report = tmp_path / "r.json"
     style = str(WALK_STYLE)
@@ -168,13 +168,27 @@ def test_bad_inputs_exit_2_and_write_nothing(case, tmp_path, capsys):
         clip = str(tmp_path / "t.bvh")
     elif case == "frames_outside":
         extra = ["--frames", "2:99999"]
+    elif case == "empty_clip":
+        (tmp_path / "e.bvh").write_text("")
+        clip = str(tmp_path / "e.bvh")
+    elif case == "bad_style_field":
+        (tmp_path / "s.yaml").write_text(WALK_STYLE.read_text().replace("k_shoe:", "k_shoe: -1\nk_shoe_x:", 1))
+        style = str(tmp_path / "s.yaml")
+    elif case == "bad_max_iter":
+        extra = ["--max-iter", "0"]
+    elif case == "report_not_json":
+        report = tmp_path / "r.txt"
     rc = _run(["evaluate-style", style, "--test", clip, "--report", str(report), *extra])
     err = capsys.readouterr().err
     assert rc == 2, err
     assert not report.exists()
     assert "error" in err
+    if case in ("no_provenance", "bad_style_field"):
+        assert "s.yaml" in err
     if case == "no_provenance":
-        assert "s.yaml" in err and "provenance" in err
+        assert "provenance" in err
+    if case == "bad_style_field":
+        assert "s.yaml:" in err  # file:line
     if case == "truncated":
         assert "t.bvh" in err
 
