@@ -172,10 +172,11 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     by_foot = _strides(steps, t0)
     windows = sorted(by_foot["l"] + by_foot["r"])  # the bootstrap's units: every stride of either foot
     real_feat = H.style_features(tt, qr, stance)
-    variants, per_stride = {}, {}
+    variants, per_stride, curves = {}, {}, {"real": qr}
     for name in VARIANTS:
         m = motions[name]
         qp = m.canonical(m.to_canonical(tt))
+        curves[name] = qp
         feat = H.style_features(tt, qp, stance)
         per_stride[name] = H.per_stride_rms_deg(tt, qp, qr, windows)
         variants[name] = {
@@ -198,7 +199,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         skipped.append("noise floor: no foot has two complete strides in the trial")
     if len(windows) < 3:
         skipped.append(f"bootstrap: only {len(windows)} stride(s); the intervals are not meaningful")
-    skipped.append("plots (joint curves per group, ghost strips) are not written")
+    skipped.append("plots: the ghost preview strip is not written (joint curves are, with matplotlib)")
     skipped.append("initial root state: the synthesis starts from the footprints' root path, not the trial's "
                    "first root state")
     return {
@@ -220,7 +221,42 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "paired_bootstrap_deg": paired,
         "skipped": skipped,
         "seconds": round(time.perf_counter() - t_start, 1),
+        "_curves": {"t": tt, **curves},  # popped by the command for the plot, not written
     }
+
+
+PLOT_DOFS = ("hip_flex_l", "knee_flex_l", "ankle_flex_l", "waist_flex", "waist_lat", "chest_flex",
+             "shoulder_flex_l", "elbow_flex_l")
+
+
+def plot_curves(curves: dict, path: Path) -> bool:
+    """Joint curves (deg over s) of the real trial and the four variants for a few DOFs of each
+    group, one panel per DOF, written atomically as PNG; False if matplotlib is missing."""
+    try:
+        from matplotlib.figure import Figure
+    except ImportError:
+        return False
+    import io
+
+    from scenarios.atomic import atomic_write
+    from scenegraph.body import JOINT_DOF_NAMES, N_ROOT
+
+    fig = Figure(figsize=(12, 8), dpi=80)
+    axes = fig.subplots(2, 4).ravel()
+    for ax, dof in zip(axes, PLOT_DOFS):
+        j = N_ROOT + JOINT_DOF_NAMES.index(dof)
+        for name in ("real", *VARIANTS):
+            ax.plot(curves["t"], np.degrees(curves[name][:, j]), lw=2.5 if name == "real" else 1.2,
+                    color="k" if name == "real" else None, label=name)
+        ax.set_title(dof, fontsize=9)
+        ax.set_xlabel("s", fontsize=8)
+    axes[0].set_ylabel("deg")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    atomic_write(path, buf.getvalue())
+    return True
 
 
 def _jsonable(x):
@@ -263,6 +299,11 @@ def _cmd_evaluate(args) -> int:
         raise
     except (ValueError, OSError) as exc:
         raise InputError(f"{args.test}: {exc}") from None
+    curves = rep.pop("_curves")
+    plot = report.with_suffix(".curves.png")
+    rep["plot"] = str(plot) if plot_curves(curves, plot) else None
+    if rep["plot"] is None:
+        rep["skipped"].append("plots: matplotlib is not installed (pip install compose-motion[plots])")
     atomic_write(report, json.dumps(_jsonable(rep), indent=1))
     for name in VARIANTS:
         v = rep["variants"][name]

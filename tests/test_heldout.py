@@ -203,6 +203,8 @@ def test_end_to_end_on_a_short_slice(tmp_path):
     assert rc == 0
     rep = json.loads(report.read_text())
     assert set(rep["variants"]) == {"learned", "default", "springs_off", "kinematic"}
+    if rep["plot"] is not None:
+        assert Path(rep["plot"]).is_file() and Path(rep["plot"]).stat().st_size > 1000
     for v in rep["variants"].values():
         assert set(v["rms_deg"]) == {"legs", "pelvis_trunk", "arms", "all"}
         assert 0.0 < v["rms_deg"]["all"] < 60.0
