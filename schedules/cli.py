@@ -17,6 +17,7 @@ COMMAND_MODULES = (
     "schedules.cli_run",        # run, schedule
     "schedules.cli_scenario",   # validate, schema, list
     "schedules.cli_learn",      # learn
+    "schedules.cli_evaluate",   # evaluate-style
     "schedules.cli_preview",    # preview, export
     "schedules.cli_audit",      # audit
     "schedules.cli_sweep",      # sweep
