@@ -25,30 +25,24 @@ import numpy as np
 from scenarios.errors import InputError
 from scenarios.schema import (AvoidGoal, FootprintsGoal, Scenario, StyleChangeGoal, TackleGoal, WalkToGoal,
                               joint_dofs)
-from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT  # noqa: F401 (re-exported)
 
 from .body import PRESETS, Character, make_character
-from .footsteps import (CADENCE, FOOT_WIDTH, GAITS, STANCE_FRACTION, Footstep, Gait, foot_length, gait_footsteps,
-                        standing_footsteps, walk_footsteps)
+from .footsteps import GAITS, Footstep, foot_length, gait_footsteps, standing_footsteps, walk_footsteps
 from .gait import initial_motion, style_gait
 from .ground import FLAT, Ground, ground_from_environment
 from .motion import Motion
 from .goals import Coupling, GoalRecord, coupling_records, goal_records
-from .goals.avoid import AVOID_MARGIN
-from .goals.tackle import TACKLE_CONTACT_TOL, TACKLE_SPEED_LEAD, TACKLE_SPEED_TOL
-from .measure import (REACH_ACCEL, TORSO_BODIES, avoid_measure, body_frames, chest_front, handle_track, reach_budget,
+from .goals.tackle import TACKLE_CONTACT_TOL
+from .measure import (avoid_measure, body_frames, chest_front, handle_track, reach_budget,
                       tackle_measure, torso_distance)
 from .problem import Avoid, HandleTarget, Spring
 from .style import Style, default_style, load_style
 
-__all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets", "goal_weight",
-           "coupling_targets", "coupling_springs", "handle_track", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH",
-           "adversarial_plans_last", "tackle_measure", "avoid_measure", "scale_style_to_body",
-           "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL", "TARGET_WEIGHT", "AVOID_WEIGHT", "START_WEIGHT",
-           # re-exported from scenegraph.measure / scenegraph.goals / scenegraph.footsteps for callers
-           "body_frames", "chest_front", "torso_distance", "reach_budget", "GAITS", "Gait", "foot_length",
-           "gait_footsteps", "walk_footsteps", "standing_footsteps", "TACKLE_SPEED_LEAD", "AVOID_MARGIN",
-           "REACH_ACCEL", "TORSO_BODIES"]
+__all__ = ["Scene", "CharacterState", "GoalSpec", "CouplingSpec", "build_scene", "goal_targets",
+           "goal_weight", "coupling_targets", "coupling_springs", "handle_track", "adversarial_plans_last",
+           "tackle_measure", "avoid_measure", "scale_style_to_body", "TACKLE_CONTACT_TOL", "body_frames",
+           "chest_front", "torso_distance", "reach_budget", "GAITS", "foot_length", "gait_footsteps",
+           "walk_footsteps", "standing_footsteps"]
 
 FREE_DURATION_RANGE = (0.5, 2.0)  # timing: free without duration_bounds: the motion lasts 0.5–2 × duration
 
