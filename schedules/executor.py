@@ -396,6 +396,31 @@ def _resumed_step(old: dict | None, run_dir: Path, number: int, step_id: str, fi
     return d
 
 
+def judge(step: Step, d: dict, fail_capped: bool) -> dict:
+    """The acceptance policy (plain and Dask executors) on a solved Step's data, in place: a timing step that
+    failed or violates a hard group gets ``discarded``; a full step that failed (a capped one
+    with every hard group held is accepted unless ``fail_capped``) gets ``failed`` (the
+    message); ``capped`` marks an accepted full step at its iteration cap."""
+    rec = _record(0, step, d)
+    # a timing step is a warm start for the full step after it, used only when it converged (capped
+    # ones left feet sliding by up to 0.5 m between collocation points); a full step at its cap that
+    # holds every constraint is kept: the final audit and goals judge the run
+    bad = _hard_violations(rec.violations)
+    capped = rec.status == "Maximum_Iterations_Exceeded"
+    accepted = rec.success or (capped and step.kind == FULL and not fail_capped)
+    if step.kind == FULL and capped and accepted and not bad:
+        d["capped"] = True
+    if step.kind != FULL and (not accepted or bad):
+        d["discarded"] = True
+        d["discard_reason"] = f"{rec.status}; " + ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items()))
+    elif not accepted or bad:
+        groups = ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items(), key=lambda kv: -kv[1])) \
+            or "none above tolerance"
+        d["failed"] = (f"step {step.id!r} failed: IPOPT status {rec.status} after {rec.iterations} iterations; "
+                       f"violated constraint groups: {groups} (tolerance {VIOLATION_TOL:g})")
+    return d
+
+
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
                  jobs: int = 1, resume: bool = False, fail_capped: bool = False, log=None) -> RunResult:
     """Run every Step of ``schedule`` over ``scene``; see the module docstring.
@@ -502,29 +527,14 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                 print(f"[{index[s.id] + 1}/{n}] {s.id} (cycle {s.cycle}, {s.kind}): {rec.status}, "
                       f"{rec.iterations} it, E={rec.energy:.4g}, {rec.seconds:.1f} s; "
                       f"elapsed {_fmt_s(elapsed)}, ETA {_fmt_s(eta)}", file=log, flush=True)
-                bad = _hard_violations(rec.violations)
-                # policy: a timing step is a warm start for the full step after it, used only when it
-                # converged (capped ones were measured to leave feet sliding by up to 0.5 m between
-                # collocation points, which the full step then inherits)
-                capped = rec.status == "Maximum_Iterations_Exceeded"
-                # a full step at its cap that holds every constraint is kept (see the docstring):
-                # the final audit and goals judge the run
-                accepted = rec.success or (capped and s.kind == FULL and not fail_capped)
-                if s.kind == FULL and capped and accepted and not bad:
+                judge(s, d, fail_capped)
+                if d.get("capped"):
                     print(f"    warning: {s.id} reached its iteration cap; kept as feasible, not converged",
                           file=log, flush=True)
-                if s.kind != FULL and (not accepted or bad):
-                    # a timing step that leaves constraints violated is no warm start: discard it,
-                    # the full step after it starts from the state before it (reported as such)
-                    d["discarded"] = True
-                    print(f"    {s.id}: timing result discarded ({rec.status}; "
-                          + ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items())) + ")", file=log, flush=True)
-                elif not accepted or bad:
-                    groups = ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items(), key=lambda kv: -kv[1])) \
-                        or "none above tolerance"
-                    raise StepFailed(f"step {s.id!r} failed: IPOPT status {rec.status} after {rec.iterations} "
-                                     f"iterations; violated constraint groups: {groups} "
-                                     f"(tolerance {VIOLATION_TOL:g}); finished steps are kept in {run_dir}")
+                if d.get("discarded"):  # the full step after it starts from the state before it
+                    print(f"    {s.id}: timing result discarded ({d['discard_reason']})", file=log, flush=True)
+                elif d.get("failed"):
+                    raise StepFailed(f"{d['failed']}; finished steps are kept in {run_dir}")
                 write_checkpoint(manifest, f"{index[s.id] + 1:03d}", d)
                 solved_now += 1
                 if stop_after and solved_now >= stop_after:

@@ -39,12 +39,11 @@ from typing import Any
 
 import numpy as np
 
-from .executor import (FULL, VIOLATION_TOL, _apply, _hard_violations, _merge_contacts, _record, presolve_character,
-                       solve_step)
+from .executor import FULL, VIOLATION_TOL, _apply, _merge_contacts, judge, presolve_character, solve_step
 from .step import Schedule, Step
 
 __all__ = ["SCENE_KEY", "step_task_key", "presolve_task_key", "schedule_graph", "step_inputs", "step_task",
-           "presolve_task", "judge", "step_key", "presolve_key", "code_version", "Given", "apply_results",
+           "presolve_task", "step_key", "presolve_key", "code_version", "Given", "apply_results",
            "STORE_FORMAT"]
 
 SCENE_KEY = "scene"
@@ -269,28 +268,6 @@ def apply_results(scene, presolves: dict[str, dict], steps: list[tuple[str, dict
 def step_inputs(scene, who: tuple[str, ...], presolves: list[dict], kinds: tuple[str, ...], ancestors: list[dict]):
     """The input Scene and contact forces of a Step (see :func:`apply_results`)."""
     return apply_results(scene, dict(zip(who, presolves)), list(zip(kinds, ancestors)))
-
-
-def judge(step: Step, d: dict, fail_capped: bool) -> dict:
-    """The executor's acceptance policy on a solved Step's data, in place: a timing step that
-    failed or violates a hard group gets ``discarded``; a full step that failed (a capped one
-    with every hard group held is accepted unless ``fail_capped``) gets ``failed`` (the
-    message); ``capped`` marks an accepted full step at its iteration cap."""
-    rec = _record(0, step, d)
-    bad = _hard_violations(rec.violations)
-    capped = rec.status == "Maximum_Iterations_Exceeded"
-    accepted = rec.success or (capped and step.kind == FULL and not fail_capped)
-    if step.kind == FULL and capped and accepted and not bad:
-        d["capped"] = True
-    if step.kind != FULL and (not accepted or bad):
-        d["discarded"] = True
-        d["discard_reason"] = f"{rec.status}; " + ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items()))
-    elif not accepted or bad:
-        groups = ", ".join(f"{k}={v:.3g}" for k, v in sorted(bad.items(), key=lambda kv: -kv[1])) \
-            or "none above tolerance"
-        d["failed"] = (f"step {step.id!r} failed: IPOPT status {rec.status} after {rec.iterations} iterations; "
-                       f"violated constraint groups: {groups} (tolerance {VIOLATION_TOL:g})")
-    return d
 
 
 def step_task(step: Step, scene, who: tuple[str, ...], presolves: list[dict], kinds: tuple[str, ...],
