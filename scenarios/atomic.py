@@ -27,7 +27,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from .errors import ComposeError, InputError
+from scenarios.errors import ComposeError, InputError
 
 __all__ = ["atomic_path", "atomic_write", "atomic_dir", "append_log", "file_mode", "WriteError"]
 

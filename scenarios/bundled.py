@@ -14,8 +14,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .errors import InputError, Location
-from .names import is_style_path, suggest
+from scenarios.errors import InputError, Location
+from scenarios.names import is_style_path, suggest
 
 __all__ = ["BUNDLED_DIR", "STYLES_DIR", "BUILTIN_STYLES", "bundled_scenarios", "bundled_styles",
            "find_scenario", "resolve_style", "style_problem", "allowed_roots", "describe_scenario"]
@@ -110,7 +110,7 @@ def resolve_style(ref: str, base_dir: Path | None = None) -> Path | None:
 
 def describe_scenario(path: Path) -> str:
     """The one-line ``description`` of a scenario file, without validating it."""
-    from .yamlio import load_yaml
+    from scenarios.yamlio import load_yaml
     try:
         data, _ = load_yaml(path)
     except InputError as exc:

@@ -13,11 +13,11 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from .bundled import bundled_styles, find_scenario
-from .errors import InputError, Location
-from .repeat import REPEAT_JSON_SCHEMA, expand_repeats
-from .schema import FieldProblem, Scenario
-from .yamlio import Positions, error_location, parse_yaml, read_text
+from scenarios.bundled import bundled_styles, find_scenario
+from scenarios.errors import InputError, Location
+from scenarios.repeat import REPEAT_JSON_SCHEMA, expand_repeats
+from scenarios.schema import FieldProblem, Scenario
+from scenarios.yamlio import Positions, error_location, parse_yaml, read_text
 
 __all__ = ["load_scenario", "parse_scenario", "validate_scenario", "validation_context", "scenario_json_schema"]
 

@@ -28,8 +28,8 @@ import copy
 import re
 from typing import Any
 
-from .errors import InputError
-from .yamlio import Positions, error_location
+from scenarios.errors import InputError
+from scenarios.yamlio import Positions, error_location
 
 __all__ = ["expand_repeats", "SECTIONS", "MAX_REPEAT", "REPEAT_JSON_SCHEMA"]
 

@@ -28,9 +28,9 @@ from typing import Annotated, Any, ClassVar, Literal, Union
 from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, Strict, StringConstraints,
                       ValidationInfo, field_validator, model_validator)
 
-from .bundled import resolve_style, style_problem
-from .names import is_style_path, suggest
-from .weights import AVOID_WEIGHT, TARGET_WEIGHT
+from scenarios.bundled import resolve_style, style_problem
+from scenarios.names import is_style_path, suggest
+from scenarios.weights import AVOID_WEIGHT, TARGET_WEIGHT
 
 _EPS = 1e-9  # s
 
@@ -116,7 +116,7 @@ MAX_GOALS = 200  # goals of one scenario
 # The solver's collocation rate (scenegraph.problem.Subproblem.collocation_hz; a test asserts
 # they agree): an interval shorter than 1/COLLOCATION_HZ may hold no collocation point
 COLLOCATION_HZ = 30.0
-# Body sizes the plausibility checks use (scenegraph.body.PRESETS; a test asserts they agree)
+# Body sizes the plausibility checks use (scenegraph.model.body.PRESETS; a test asserts they agree)
 PRESET_HEIGHTS = {"adult_male": 1.75, "adult_female": 1.65, "child": 1.20}  # m, default statures
 REACH_UP = 1.35  # highest point a handle reaches, × stature (overhead, on tiptoe: ~1.3)
 REACH_OUT = 0.75  # horizontal reach of a hand from the pelvis, × stature (arm + shoulder + lean)
@@ -564,7 +564,7 @@ class Scenario(_Model):
 
     def location(self, path: tuple):
         """Where a field path (``("characters", 1, "style")``) sits in the source file."""
-        from .yamlio import error_location  # local: keeps the schema importable on its own
+        from scenarios.yamlio import error_location  # local: keeps the schema importable on its own
         return error_location(self._source, self._positions, tuple(path))
 
     @property
@@ -635,7 +635,7 @@ class Scenario(_Model):
 
     def ground_height(self, x: float, y: float) -> float:
         """Height (m) of the ground at (x, y): 0 on the flat ground, the last slope covering
-        the point otherwise (as scenegraph.ground builds it)."""
+        the point otherwise (as scenegraph.model.ground builds it)."""
         import math
         z = 0.0
         for sl in self.environment.slopes:

@@ -19,8 +19,8 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from .atomic import atomic_write
-from .errors import InputError, Location
+from scenarios.atomic import atomic_write
+from scenarios.errors import InputError, Location
 
 __all__ = ["load_yaml", "parse_yaml", "read_text", "validate", "load_model", "format_path", "dump_yaml_atomic"]
 

@@ -16,7 +16,7 @@ import functools  # noqa: E402
 
 import pytest  # noqa: E402
 
-from scenegraph.body import make_character  # noqa: E402
+from scenegraph.model.body import make_character  # noqa: E402
 
 # (preset, height m, mass kg): the presets at their own size and scaled to other bodies.
 BODIES = [("adult_male", None, None), ("adult_female", 1.80, 80.0), ("child", 1.40, 35.0),

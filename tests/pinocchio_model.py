@@ -6,7 +6,7 @@ operational frame per handle.  Joints are either Pinocchio's specialised axis-al
 types (``aligned=True``, the fast ones: RX/RY/RZ, PX/PY/PZ; a DOF about a negative axis
 gets a joint frame turned by 180° so that its axis is positive) or the generic
 ``JointModelRevoluteUnaligned`` / ``JointModelPrismaticUnaligned`` about the DOF's axis.  Built only from the public data of
-:class:`scenegraph.body.Character`, never from compose's dynamics code.
+:class:`scenegraph.model.body.Character`, never from compose's dynamics code.
 
 Pinocchio's CRBA assumes the joints are numbered depth-first (each subtree a contiguous
 block of velocity indices); compose numbers its DOFs parent-before-child but not
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from scenegraph.body import Character
+from scenegraph.model.body import Character
 
 
 def depth_first_order(ch: Character) -> list[int]:

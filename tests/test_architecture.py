@@ -8,19 +8,21 @@ rules:
 2. ``scenarios`` (the language) imports neither ``scenegraph`` nor ``schedules``;
 3. ``scenegraph`` (the model, the world and the solver) never imports ``schedules``;
 4. the physics audit and the residual kernels never see the transcription:
-   ``scenegraph/audit.py`` and ``scenegraph/residual.py`` never import ``scenegraph.problem``;
-5. the plan is data: ``schedules/compiler.py`` and ``schedules/step.py`` import no CasADi,
+   ``scenegraph/model/audit.py`` and ``scenegraph/model/residual.py`` never import ``scenegraph.problem``;
+5. the plan is data: ``schedules/plan/compiler.py`` and ``schedules/plan/step.py`` import no CasADi,
    directly or through anything they import at module level (package ``__init__`` files
    included, as Python runs them); and ``compose schedule`` really does not load it;
 6. learning (``scenegraph/nio/``) sits on top of the model: no other ``scenegraph`` module
    imports it, and inside it each module imports only those before it in ``NIO_ORDER``;
 7. the file and version helpers ``scenarios/atomic.py`` and ``scenarios/versions.py`` import
    nothing of the project but ``scenarios.errors``, so every layer can use them;
-8. goal and coupling records (``scenegraph/goals``) and the measures they use
-   (``scenegraph/measure.py``) never import the Scene (``scenegraph.scene`` builds them);
+8. goal and coupling records (``scenegraph/world/goals``) and the measures they use
+   (``scenegraph/world/measure.py``) never import the Scene (``scenegraph.world.scene`` builds them);
 9. the stage auditor (``scenegraph/stage_audit/``) reads the stage only: it imports no
    other ``scenegraph`` module (not the transcription, the residual kernels, the dynamics
-   or the body model) and no CasADi — it is the independent check of them.
+   or the body model) and no CasADi — it is the independent check of them;
+10. the layers are sub-packages in the order of ``LAYERS``, and a module imports only from
+    its own layer or layers before it (no upward imports); every module belongs to a layer.
 """
 from __future__ import annotations
 
@@ -165,7 +167,7 @@ def _module_level_closure(start: str) -> set[str]:
 
 def test_the_walk_sees_every_package_and_their_imports():
     mods = _modules()
-    assert {"scenarios.schema", "scenegraph.body", "schedules.compiler", "scenegraph.problem"} <= set(mods)
+    assert {"scenarios.schema", "scenegraph.model.body", "schedules.plan.compiler", "scenegraph.problem"} <= set(mods)
     assert "scenarios.schema" in _graph()["scenarios.loader"]
     assert "casadi" in _imports("scenegraph.problem.transcription")[1]
 
@@ -183,14 +185,14 @@ def test_model_never_imports_the_plan():
 
 
 def test_audit_and_residual_never_see_the_transcription():
-    bad = [f"{m} -> {t}" for m in ("scenegraph.audit", "scenegraph.residual")
+    bad = [f"{m} -> {t}" for m in ("scenegraph.model.audit", "scenegraph.model.residual")
            for t in sorted(_imports(m)[0]) if t == "scenegraph.problem" or t.startswith("scenegraph.problem.")]
     assert bad == []
 
 
 def test_goal_records_never_import_the_scene():
-    bad = [f"{m} -> {t}" for m in _modules() if m == "scenegraph.measure" or m.startswith("scenegraph.goals")
-           for t in sorted(_imports(m)[0]) if t == "scenegraph.scene"]
+    bad = [f"{m} -> {t}" for m in _modules() if m == "scenegraph.world.measure" or m.startswith("scenegraph.world.goals")
+           for t in sorted(_imports(m)[0]) if t == "scenegraph.world.scene"]
     assert bad == []
 
 
@@ -204,13 +206,13 @@ def test_stage_auditor_reads_the_stage_only():
 
 
 def test_compiler_and_step_are_free_of_casadi():
-    for m in ("schedules.compiler", "schedules.step"):
+    for m in ("schedules.plan.compiler", "schedules.plan.step"):
         loaded = _module_level_closure(m)
         assert "casadi" not in loaded, (m, sorted(x for x in loaded if x.split(".")[0] == "scenegraph"))
 
 
 def test_compose_schedule_does_not_import_casadi():
-    code = ("import sys\nfrom schedules.cli import main\nrc = main(['schedule', 'walk_to_run'])\n"
+    code = ("import sys\nfrom schedules.cli.main import main\nrc = main(['schedule', 'walk_to_run'])\n"
             "print('CASADI' if 'casadi' in sys.modules else 'NO-CASADI', rc)\n")
     env = dict(os.environ, OMP_NUM_THREADS="1")
     p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
@@ -221,7 +223,7 @@ def test_compose_schedule_does_not_import_casadi():
 # the order of the computation in scenegraph/nio/ (its __init__ docstring): each module may
 # import only the modules before it
 NIO_ORDER = ("theta", "energy", "counterexamples", "records", "initial", "bundle", "gradient", "problem",
-             "target", "resynthesis", "learn")
+             "target", "resynthesis", "learn", "heldout")
 
 
 def test_learning_is_on_top_of_the_model_and_ordered_inside():
@@ -237,3 +239,39 @@ def test_learning_is_on_top_of_the_model_and_ordered_inside():
 def test_file_and_version_helpers_are_leaves():
     for m in ("scenarios.atomic", "scenarios.versions"):
         assert _graph()[m] <= {"scenarios.errors"}, (m, sorted(_graph()[m]))
+
+
+# the pipeline's layers, in order (docs/architecture.md): a module may import its own layer
+# and the layers before it.  ``scenegraph.stage_audit`` reads stages only (rule 9), so it sits
+# with the output; the plan needs only the language, so it comes before nothing of scenegraph
+# at all, but placing it after export keeps one line.
+LAYERS = ("scenarios", "scenegraph.model", "scenegraph.problem", "scenegraph.world", "scenegraph.mocap",
+          "scenegraph.nio", "scenegraph.export", "scenegraph.stage_audit", "schedules.plan",
+          "schedules.execution", "schedules.cli")
+# package __init__ files above the layers: what they may re-export
+ROOT_PACKAGES = {"scenegraph": "scenegraph.model", "schedules": "schedules.plan"}
+
+
+def _layer(mod: str) -> int:
+    best = -1
+    for i, name in enumerate(LAYERS):
+        if mod == name or mod.startswith(name + "."):
+            best = i if best < 0 or len(name) > len(LAYERS[best]) else best
+    return best
+
+
+def test_every_module_belongs_to_a_layer():
+    loose = [m for m in _modules() if _layer(m) < 0 and m not in ROOT_PACKAGES]
+    assert loose == []
+
+
+def test_no_upward_imports_between_layers():
+    bad = []
+    for m, ts in sorted(_graph().items()):
+        own = _layer(ROOT_PACKAGES[m]) if m in ROOT_PACKAGES else _layer(m)
+        for t in sorted(ts):
+            if t in ROOT_PACKAGES:  # ``import scenegraph`` (for its path) loads only its __init__
+                t = ROOT_PACKAGES[t]
+            if _layer(t) > own:
+                bad.append(f"{m} ({LAYERS[own]}) -> {t} ({LAYERS[_layer(t)]})")
+    assert bad == []

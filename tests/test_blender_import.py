@@ -26,8 +26,8 @@ import pytest
 pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
 
-from scenegraph.body import make_character, standing_pose  # noqa: E402
-from scenegraph.usd_export import CharacterTrack, Marker, export_usd  # noqa: E402
+from scenegraph.model.body import make_character, standing_pose  # noqa: E402
+from scenegraph.export.usd import CharacterTrack, Marker, export_usd  # noqa: E402
 
 
 def _bpy_python() -> str | None:

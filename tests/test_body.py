@@ -9,8 +9,8 @@ import pytest
 
 from conftest import character
 from scenarios.errors import ComposeError, InputError
-from scenegraph.body import DENSITY, DOF_NAMES, default_character, JOINT_DOF_NAMES, N_DOF, N_JOINT, PRESETS, make_character, standing_pose
-from scenegraph.kinematics import handle_positions_fn
+from scenegraph.model.body import DENSITY, DOF_NAMES, default_character, JOINT_DOF_NAMES, N_DOF, N_JOINT, PRESETS, make_character, standing_pose
+from scenegraph.model.kinematics import handle_positions_fn
 
 LIMBS = ("upper_arm", "forearm", "hand", "thigh", "shank", "foot", "toes")
 
@@ -157,7 +157,7 @@ def test_ellipsoid_inertia(adult):
     th = adult.body("thigh_l")
     assert 2 * max(th.semi_axes) == pytest.approx(-adult.dofs[adult.dof_index("knee_flex_l")].offset[2], rel=1e-12)
     # a sphere: 2/5 m r²
-    from scenegraph.body import Body
+    from scenegraph.model.body import Body
     s = Body("ball", 0, None, 3.0, (0, 0, 0), (0.1, 0.1, 0.1))
     assert np.allclose(s.inertia, np.eye(3) * 0.4 * 3.0 * 0.01)
 
@@ -202,8 +202,8 @@ SIGNS = [
 @pytest.mark.parametrize("dof, handle, axis, sign", SIGNS)
 def test_positive_angles_move_the_body_anatomically(dof, handle, axis, sign):
     import numpy as np
-    from scenegraph.body import make_character, standing_pose
-    from scenegraph.kinematics import handle_positions_fn
+    from scenegraph.model.body import make_character, standing_pose
+    from scenegraph.model.kinematics import handle_positions_fn
 
     ch = make_character()
     f = handle_positions_fn(ch, (handle,))

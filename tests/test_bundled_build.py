@@ -18,9 +18,9 @@ import pytest
 from scenarios.bundled import bundled_scenarios
 from scenarios.loader import load_scenario
 from scenegraph.problem import transcribe
-from scenegraph.scene import build_scene
-from schedules.compiler import compile_schedule
-from schedules.lower import lower, lower_joint
+from scenegraph.world.scene import build_scene
+from schedules.plan.compiler import compile_schedule
+from schedules.execution.lower import lower, lower_joint
 
 
 def _shape(step, sp) -> tuple:

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from scenarios.errors import ComposeError, InputError
-from scenegraph import bvh_export
-from scenegraph.body import make_character, standing_pose
-from scenegraph.bvh_export import AXES, euler_zyx, export_bvh, resample_q
-from scenegraph.kinematics import numeric_fk
-from scenegraph.usd_export import CharacterTrack
+from scenegraph.export import bvh as bvh_export
+from scenegraph.model.body import make_character, standing_pose
+from scenegraph.export.bvh import AXES, euler_zyx, export_bvh, resample_q
+from scenegraph.model.kinematics import numeric_fk
+from scenegraph.export.usd import CharacterTrack
 
 
 def synthetic_q(ch, T, fps, seed):

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from scenarios.errors import InputError
-from scenegraph.footsteps import Footstep
-from schedules import checkpoints as ck
-from schedules import executor as ex
+from scenegraph.model.footsteps import Footstep
+from schedules.execution import checkpoints as ck
+from schedules.execution import executor as ex
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -195,8 +195,8 @@ def test_atomic_write_mode_follows_umask_and_leaves_no_temporaries(tmp_path, mon
 def fake_run(monkeypatch):
     """(scene, schedule, calls) with the executor's solves replaced by deterministic fakes."""
     from scenarios.loader import load_scenario
-    from scenegraph.scene import build_scene
-    from schedules.compiler import compile_schedule
+    from scenegraph.world.scene import build_scene
+    from schedules.plan.compiler import compile_schedule
 
     scn = load_scenario("walk")
     scene, schedule = build_scene(scn), compile_schedule(scn)
@@ -330,7 +330,7 @@ def test_old_pickle_run_folder_is_refused_on_resume(tmp_path, fake_run):
 
 _HOLD = textwrap.dedent("""
     import sys, time
-    from schedules.checkpoints import RunLock
+    from schedules.execution.checkpoints import RunLock
     with RunLock(sys.argv[1]):
         print("locked", flush=True)
         time.sleep(60)
@@ -363,7 +363,7 @@ def test_compose_run_in_a_locked_folder_exits_2(tmp_path):
                          env=env)
     try:
         assert p.stdout.readline().strip() == "locked"
-        res = subprocess.run([sys.executable, "-m", "schedules.cli", "run", "walk", "-o", "w.usda", "--run-dir",
+        res = subprocess.run([sys.executable, "-m", "schedules.cli.main", "run", "walk", "-o", "w.usda", "--run-dir",
                               "run"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     finally:
         p.kill()

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from schedules.cli import main
+from schedules.cli.main import main
 
 BAD = Path(__file__).parent / "bad_inputs"
 GOLDEN = Path(__file__).parent / "golden" / "two_characters.usda"
@@ -100,7 +100,7 @@ def test_stage_commands_check_arguments(command, argv, fragment, tmp_path, monke
 def test_console_script_prints_no_traceback(tmp_path):
     """Through a real process: the USD library's own error text becomes one line, exit 2."""
     f = _copy("png_renamed.usda", tmp_path)
-    res = subprocess.run([sys.executable, "-m", "schedules.cli", "export-bvh", str(f)], capture_output=True,
+    res = subprocess.run([sys.executable, "-m", "schedules.cli.main", "export-bvh", str(f)], capture_output=True,
                          text=True, cwd=tmp_path, timeout=300)
     assert res.returncode == 2, res.stderr
     lines = res.stderr.strip().splitlines()

@@ -13,8 +13,8 @@ import pytest
 
 from conftest import character
 from pinocchio_model import random_states
-from scenegraph import codegen
-from scenegraph.codegen import CodegenWarning, compiled
+from scenegraph.model import codegen
+from scenegraph.model.codegen import CodegenWarning, compiled
 
 
 @pytest.fixture
@@ -80,7 +80,7 @@ def test_cache_is_shared_between_processes(cache, adult):
     env = dict(os.environ, COMPOSE_CACHE_DIR=str(cache))
     code = """
         import casadi as ca
-        from scenegraph import codegen
+        from scenegraph.model import codegen
         x = ca.SX.sym("x", 4)
         g = codegen.compiled(ca.Function("race", [x], [ca.cumsum(ca.sin(x))]))
         assert g.class_name() == "External", g
@@ -96,8 +96,8 @@ def test_cache_is_shared_between_processes(cache, adult):
     f = compiled(codegen.id_function(adult, compile=False))  # compiled here ...
     assert f.class_name() == "External"
     res = _run("""
-        from scenegraph import codegen
-        from scenegraph.body import make_character
+        from scenegraph.model import codegen
+        from scenegraph.model.body import make_character
         f = codegen.id_function(make_character())
         print(f.class_name(), codegen.STATS["compiled"], codegen.STATS["loaded"])
     """, env)

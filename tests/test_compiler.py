@@ -10,8 +10,8 @@ import pytest
 from scenarios import bundled_scenarios, load_scenario, parse_scenario
 from schedules import (COUPLED, DECREASING_HORIZON, JOINT, TIME_LAYERED, TIMEWARP, Schedule, Step,
                        compile_schedule)
-from schedules.cli import main
-from schedules.compiler import layer_windows
+from schedules.cli.main import main
+from schedules.plan.compiler import layer_windows
 from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 
 FULL = Path(__file__).resolve().parent / "scenarios" / "full.yaml"

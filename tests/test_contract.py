@@ -1,7 +1,7 @@
 """The compiler–executor contract, and the scenario fields that used to be inert.
 
-1. The Step vocabulary (schedules/step.py: kinds, roles, free blocks, terms and their value
-   classes) is handled by the lowering (schedules/lower.py ``HANDLED``); what the compiler
+1. The Step vocabulary (schedules/plan/step.py: kinds, roles, free blocks, terms and their value
+   classes) is handled by the lowering (schedules/execution/lower.py ``HANDLED``); what the compiler
    emits over every bundled scenario and a set of variants (explicit schedule kinds, free
    timing, receding windows, no timing step) is a subset of it — and covers it, so the
    vocabulary lists nothing the compiler never writes.  The lowering rejects an unknown item.
@@ -22,12 +22,12 @@ import pytest
 from scenarios.bundled import bundled_scenarios
 from scenarios.errors import ComposeError, InputError
 from scenarios.loader import load_scenario, parse_scenario
-from scenegraph.dynamics import friction_basis
+from scenegraph.model.dynamics import friction_basis
 from scenegraph.problem import transcribe
-from scenegraph.scene import build_scene
-from schedules.compiler import compile_schedule
-from schedules.lower import HANDLED, check_step, lower, lower_joint
-from schedules.step import HARD, declared_vocabulary, vocabulary
+from scenegraph.world.scene import build_scene
+from schedules.plan.compiler import compile_schedule
+from schedules.execution.lower import HANDLED, check_step, lower, lower_joint
+from schedules.plan.step import HARD, declared_vocabulary, vocabulary
 
 FULL_YAML = __import__("pathlib").Path(__file__).parent / "scenarios" / "full.yaml"
 
@@ -249,9 +249,9 @@ def test_walk_to_heading_without_time_to_stand_is_rejected_with_its_location():
 
 @pytest.mark.slow
 def test_the_executor_solves_a_hard_hand_hold_jointly(monkeypatch):
-    """solve_step on the full step of ``schedule.kind: timewarp``: one joint NLP (scenegraph/joint.py)
+    """solve_step on the full step of ``schedule.kind: timewarp``: one joint NLP (scenegraph/problem/joint.py)
     for both characters (3 IPOPT iterations: the plumbing, not the optimum; ~80 s to build)."""
-    from schedules.executor import solve_step
+    from schedules.execution.executor import solve_step
     monkeypatch.setenv("COMPOSE_MAX_ITER", "3")
     scn = _variant("handhold", "schedule:\n  kind: timewarp\n")
     scene = build_scene(scn)
@@ -267,7 +267,7 @@ def test_free_timing_keeps_goal_times_canonical():
     """With ``timing: free`` a goal time is canonical: when a timing step stretches the motion to
     2 s, the walk_to target (1.4 s of a 1.4 s scene) moves to the new end; with fixed timing
     a goal time is a world time and stays."""
-    from scenegraph.motion import Motion
+    from scenegraph.model.motion import Motion
     for text, expect_end in (("timing: free\nduration_bounds: [1.0, 2.0]\n", 2.0), ("", 1.4)):
         scn = _variant("walk_to", text, replace_=("time: 1.4", "time: 1.0"))  # arrive at 1.0 of 1.4 s
         scene = build_scene(scn)
@@ -285,7 +285,7 @@ def test_free_timing_changes_the_solved_duration():
     """The timing step of walk_to with ``timing: free`` (bounds [1, 2] s) moves the end of the
     motion off the written 1.4 s (measured 2026-12-02: to 1.528 s, Solve_Succeeded in 54
     iterations, ~45 s); with fixed timing the end is held by an equality (see above)."""
-    from schedules.executor import solve_step
+    from schedules.execution.executor import solve_step
     scn = _variant("walk_to", "timing: free\nduration_bounds: [1.0, 2.0]\n")
     timing = compile_schedule(scn).order()[0]
     c = solve_step(build_scene(scn), timing, ("walker",))["characters"]["walker"]

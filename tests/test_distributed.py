@@ -11,11 +11,11 @@ from dask.core import get_dependencies
 
 from scenarios.errors import InputError
 from scenarios.loader import load_scenario, parse_scenario
-from scenegraph.footsteps import Footstep
-from schedules import cli
-from schedules.compiler import compile_schedule
-from schedules.critical_path import critical_path
-from schedules.graph_tasks import (SCENE_KEY, presolve_task_key, schedule_graph, step_key, step_task_key)
+from scenegraph.model.footsteps import Footstep
+from schedules.cli import main as cli
+from schedules.plan.compiler import compile_schedule
+from schedules.plan.critical_path import critical_path
+from schedules.execution.graph_tasks import (SCENE_KEY, presolve_task_key, schedule_graph, step_key, step_task_key)
 
 TWO_COUPLES = """
 name: two_couples
@@ -85,7 +85,7 @@ def test_critical_path_uses_measured_times():
 
 
 def test_step_key_changes_only_for_the_edited_couple():
-    from scenegraph.scene import build_scene
+    from scenegraph.world.scene import build_scene
 
     a = parse_scenario(TWO_COUPLES)
     b = parse_scenario(TWO_COUPLES.replace("tx: [1.0, 1.1]", "tx: [1.0, 1.3]"))
@@ -104,7 +104,7 @@ def test_step_key_changes_only_for_the_edited_couple():
 
 
 def test_step_store_round_trip_and_damage(tmp_path, capsys):
-    from schedules.step_store import StepStore
+    from schedules.execution.step_store import StepStore
 
     st = StepStore(tmp_path / "store")
     key = "ab" * 32
@@ -128,7 +128,7 @@ def test_step_store_round_trip_and_damage(tmp_path, capsys):
 
 
 def test_unreachable_scheduler_is_exit_2_and_writes_nothing(tmp_path, monkeypatch, capsys):
-    from schedules import distributed
+    from schedules.execution import distributed
 
     monkeypatch.setattr(distributed, "CONNECT_TIMEOUT_S", 1.0)
     monkeypatch.chdir(tmp_path)
@@ -147,7 +147,7 @@ def test_unknown_scheduler_name_is_exit_2(tmp_path, monkeypatch, capsys):
 
 
 def test_sync_scheduler_runs_a_graph_and_reports_progress():
-    from schedules.distributed import connect
+    from schedules.execution.distributed import connect
 
     seen = []
     dsk = {"x": 1, "y": (lambda v: v + 1, "x"), "z": (lambda a, b: a * b, "x", "y")}

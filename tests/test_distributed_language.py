@@ -6,8 +6,8 @@ import yaml
 
 from scenarios.errors import InputError
 from scenarios.loader import load_scenario, parse_scenario
-from schedules import cli
-from schedules.sweep import build_variants, combinations, parse_path, parse_values, parse_vary
+from schedules.cli import main as cli
+from schedules.plan.sweep import build_variants, combinations, parse_path, parse_values, parse_vary
 
 BASE = """name: rep
 duration: 1.0

@@ -10,7 +10,7 @@ import json
 
 import pytest
 
-from schedules.cli_run import run_scenario
+from schedules.cli.run import run_scenario
 
 pytestmark = pytest.mark.slow
 

@@ -8,11 +8,11 @@ import pytest
 
 from conftest import BODIES, character
 from pinocchio_model import build_pinocchio, random_states
-from scenegraph.body import G, N_DOF, N_JOINT, N_ROOT, standing_pose
-from scenegraph.dynamics import (MU, external_generalized_force, friction_basis, gravity_vector, mass_matrix,
+from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, standing_pose
+from scenegraph.model.dynamics import (MU, external_generalized_force, friction_basis, gravity_vector, mass_matrix,
                                  muscle_and_residual, passive_force, rnea, shoe_force, sigmoid)
-from scenegraph.kinematics import handle_position
-from scenegraph.style import default_style
+from scenegraph.model.kinematics import handle_position
+from scenegraph.model.style import default_style
 
 N_STATES = 200
 TOL = 1e-8

@@ -29,15 +29,15 @@ import numpy as np
 import pytest
 
 from scenarios.loader import load_scenario
-from scenegraph.audit import audit_motion
-from scenegraph.body import make_character, standing_pose
-from scenegraph.dynamics import MU, friction_basis
-from scenegraph.footsteps import Footstep, contact_points
-from scenegraph.ground import FLAT, Ground, Plane, ground_from_environment
-from scenegraph.kinematics import handle_positions_fn
-from scenegraph.motion import Motion
-from scenegraph.scene import build_scene
-from scenegraph.style import default_style
+from scenegraph.model.audit import audit_motion
+from scenegraph.model.body import make_character, standing_pose
+from scenegraph.model.dynamics import MU, friction_basis
+from scenegraph.model.footsteps import Footstep, contact_points
+from scenegraph.model.ground import FLAT, Ground, Plane, ground_from_environment
+from scenegraph.model.kinematics import handle_positions_fn
+from scenegraph.model.motion import Motion
+from scenegraph.world.scene import build_scene
+from scenegraph.model.style import default_style
 
 EDITS = ("suitcase", "limp", "uphill", "downhill", "turn180", "springy_run")
 CH = make_character("adult_male")
@@ -164,7 +164,7 @@ def test_audit_measures_penetration_against_the_ground():
 
 
 def test_ramp_mesh_and_stage():
-    from scenegraph.usd_export import CharacterTrack, build_stage, ramp_mesh
+    from scenegraph.export.usd import CharacterTrack, build_stage, ramp_mesh
     pts, counts, idx = ramp_mesh(RAMP)
     assert pts.shape == (8, 3) and counts == [4] * 6 and sorted(set(idx)) == list(range(8))
     top = pts[:4]
@@ -207,7 +207,7 @@ def test_edited_scenarios_build(name):
         assert np.abs(q[:, i] - math.radians(5.0)).max() < 0.02
     if name == "springy_run":
         from scenarios.bundled import STYLES_DIR
-        from scenegraph.style import load_style
+        from scenegraph.model.style import load_style
         # the bundled run style's shoe (learned on the same adult_male body: no mass scaling), 5x
         assert st.style.k_shoe == pytest.approx(5.0 * load_style(STYLES_DIR / "run.yaml").k_shoe)
         steps = sorted(st.footsteps, key=lambda f: f.t0)
@@ -265,9 +265,9 @@ def solved(name: str, tmp_path_factory, style: str | None = None):
     an edit)."""
     key = (name, style)
     if key not in _SOLVED:
-        from schedules.cli_run import goal_report
-        from schedules.compiler import compile_schedule
-        from schedules.executor import run_schedule
+        from schedules.cli.run import goal_report
+        from schedules.plan.compiler import compile_schedule
+        from schedules.execution.executor import run_schedule
         scn = load_scenario(name)
         if style is not None:
             scn = scn.model_copy(update={"characters": [c.model_copy(update={"style": style})
@@ -290,7 +290,7 @@ def test_edited_scenario_solves_with_goals_and_audit(name, tmp_path_factory):
     # a full step whose objective stopped falling, or capped: kept at its iteration cap — both
     # only with every hard constraint satisfied)
     # (a timing step is only a warm start: one that did not converge is discarded and reported)
-    from schedules.executor import VIOLATION_TOL
+    from schedules.execution.executor import VIOLATION_TOL
     for r in records:
         if r.kind == "full":
             assert r.status in ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Stalled",
@@ -298,7 +298,7 @@ def test_edited_scenario_solves_with_goals_and_audit(name, tmp_path_factory):
             assert all(v <= VIOLATION_TOL for v in r.violations.values()), (r.id, r.violations)
     assert goals and all(g["holds"] for g in goals.values()), goals
     # the audit at 120 Hz passes the gate `compose run` applies (exit 1 otherwise)
-    from schedules.cli_run import AUDIT_TOLERANCES
+    from schedules.cli.run import AUDIT_TOLERANCES
     assert aud.passes(**AUDIT_TOLERANCES), aud
     assert aud.joint_limit_violation_max <= 1e-6, aud
 

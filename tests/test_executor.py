@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from schedules.executor import _merge_contacts
+from schedules.execution.executor import _merge_contacts
 
 
 def test_windowed_contact_forces_replace_only_their_window():

@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from schedules import checkpoints as ck
-from schedules import executor as ex
-from schedules import interrupts
-from schedules.cli import main
+from schedules.execution import checkpoints as ck
+from schedules.execution import executor as ex
+from schedules.execution import interrupts
+from schedules.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -61,8 +61,8 @@ def _fake_solution(scene, step):
 @pytest.fixture()
 def walk():
     from scenarios.loader import load_scenario
-    from scenegraph.scene import build_scene
-    from schedules.compiler import compile_schedule
+    from scenegraph.world.scene import build_scene
+    from schedules.plan.compiler import compile_schedule
     scn = load_scenario("walk")
     return build_scene(scn), compile_schedule(scn)
 
@@ -120,7 +120,7 @@ def test_interrupt_swallowed_by_the_solver_still_stops_the_run(tmp_path, walk, m
 def test_sigint_during_a_real_solve_exits_130_with_a_resume_hint(tmp_path):
     """The real walk (IPOPT capped at 20 iterations per step to keep it short): SIGINT as soon
     as step 1 is reported, i.e. while step 2 is being built or solved."""
-    p = subprocess.Popen([sys.executable, "-m", "schedules.cli", "run", "walk", "-o", "w.usda", "--run-dir", "run"],
+    p = subprocess.Popen([sys.executable, "-m", "schedules.cli.main", "run", "walk", "-o", "w.usda", "--run-dir", "run"],
                          cwd=tmp_path, env=_env(COMPOSE_MAX_ITER="20"), stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True)
     lines = []
@@ -148,8 +148,8 @@ def test_sigint_during_a_real_solve_exits_130_with_a_resume_hint(tmp_path):
 
 
 def test_resume_command_repeats_the_run_arguments():
-    from schedules.cli import build_parser
-    from schedules.cli_run import resume_command
+    from schedules.cli.main import build_parser
+    from schedules.cli.run import resume_command
     args = build_parser().parse_args(["run", "my scene.yaml", "-o", "o.usdc", "--jobs", "2", "--fps", "24",
                                       "--report", "r.json", "--fail-capped"])
     assert resume_command(args) == ("compose run 'my scene.yaml' --resume -o o.usdc --report r.json --jobs 2 "
@@ -159,7 +159,7 @@ def test_resume_command_repeats_the_run_arguments():
 def test_interrupt_during_export_names_the_phase(tmp_path, monkeypatch, capfd):
     monkeypatch.setattr(ex, "presolve_character", _fake_presolve)
     monkeypatch.setattr(ex, "solve_step", lambda scene, step, presolve, contacts=None: _fake_solution(scene, step))
-    import scenegraph.usd_export as ue
+    import scenegraph.export.usd as ue
 
     def export(*a, **k):
         os.kill(os.getpid(), signal.SIGINT)
@@ -252,7 +252,7 @@ def test_a_crash_in_the_presolve_is_step_0(tmp_path, monkeypatch, capfd):
 
 
 def test_an_unexpected_error_outside_the_steps_is_one_line(tmp_path, monkeypatch, capfd):
-    import schedules.cli_run as cr
+    import schedules.cli.run as cr
 
     def boom(*a, **k):
         raise KeyError("scene")
@@ -269,7 +269,7 @@ def test_an_unexpected_error_outside_the_steps_is_one_line(tmp_path, monkeypatch
 _WRITER = textwrap.dedent("""
     import sys, numpy as np
     from pathlib import Path
-    from schedules import checkpoints as ck
+    from schedules.execution import checkpoints as ck
     d = Path(sys.argv[1]); rng = np.random.default_rng(int(sys.argv[2]))
     m = ck.Manifest(d, 2, "fp"); m.save()
     i = 0
@@ -317,8 +317,8 @@ def test_interrupt_with_jobs_ends_the_workers(tmp_path, monkeypatch):
     """--jobs 2: the workers ignore SIGINT (Ctrl-C reaches the whole process group); the parent
     stops at once and terminates the workers instead of waiting for their solves."""
     from scenarios.loader import load_scenario
-    from scenegraph.scene import build_scene
-    from schedules.compiler import compile_schedule
+    from scenegraph.world.scene import build_scene
+    from schedules.plan.compiler import compile_schedule
     import threading
 
     scn = load_scenario("two_walkers")
@@ -343,9 +343,9 @@ def test_run_outputs_get_the_umask_mode_and_leave_no_temporaries(tmp_path):
     """BVH and USD go through scenarios.atomic like the checkpoints and the report: the
     file gets the mode of a new file under the umask (``mkstemp`` alone gives 0600)."""
     import stat
-    from scenegraph.body import N_DOF, make_character
-    from scenegraph.bvh_export import export_bvh
-    from scenegraph.usd_export import CharacterTrack, export_usd
+    from scenegraph.model.body import N_DOF, make_character
+    from scenegraph.export.bvh import export_bvh
+    from scenegraph.export.usd import CharacterTrack, export_usd
     tr = CharacterTrack("A", make_character(), np.zeros((4, N_DOF)))
     old = os.umask(0o027)
     try:

@@ -1,4 +1,4 @@
-"""One footstep generator (scenegraph/footsteps.py) with one foot width: every plan it makes —
+"""One footstep generator (scenegraph/model/footsteps.py) with one foot width: every plan it makes —
 a straight walk or run, a walk along a path, a walk→run change, standing — puts the feet
 FOOT_WIDTH apart, and nothing else in the package generates footsteps."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenegraph.footsteps import (FOOT_WIDTH, GAITS, footsteps_for_walk, gait_footsteps, standing_footsteps,
+from scenegraph.model.footsteps import (FOOT_WIDTH, GAITS, footsteps_for_walk, gait_footsteps, standing_footsteps,
                                   walk_footsteps)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,15 +38,15 @@ def test_every_generated_plan_puts_the_feet_foot_width_apart(steps):
 
 # modules that construct footsteps without generating a plan, and why
 NOT_GENERATORS = {
-    "scenegraph/scene.py": "_explicit_footsteps: one Footstep per footprint written in the scenario",
-    "scenegraph/contacts.py": "its own Footstep type: contacts detected in a mocap clip",
-    "schedules/checkpoints.py": "reads footsteps stored in a checkpoint",
-    "schedules/cli_learn.py": "footsteps measured from a mocap clip (the learning target)",
+    "scenegraph/world/scene.py": "_explicit_footsteps: one Footstep per footprint written in the scenario",
+    "scenegraph/mocap/contacts.py": "its own Footstep type: contacts detected in a mocap clip",
+    "schedules/execution/checkpoints.py": "reads footsteps stored in a checkpoint",
+    "schedules/cli/learn.py": "footsteps measured from a mocap clip (the learning target)",
 }
 
 
 def test_no_other_module_generates_footsteps():
-    """Only scenegraph/footsteps.py makes footstep plans; the other places that construct a
+    """Only scenegraph/model/footsteps.py makes footstep plans; the other places that construct a
     ``Footstep(...)`` copy footsteps from a file, a clip or a checkpoint (NOT_GENERATORS), and
     no module but footsteps.py holds a foot-width constant."""
     makers = {}
@@ -58,6 +58,6 @@ def test_no_other_module_generates_footsteps():
         rel = str(p.relative_to(ROOT))
         if n:
             makers[rel] = n
-        if rel != "scenegraph/footsteps.py":
+        if rel != "scenegraph/model/footsteps.py":
             assert "FOOT_WIDTH =" not in text and "width: float = 0.1" not in text, rel
-    assert set(makers) - {"scenegraph/footsteps.py"} <= set(NOT_GENERATORS), makers
+    assert set(makers) - {"scenegraph/model/footsteps.py"} <= set(NOT_GENERATORS), makers

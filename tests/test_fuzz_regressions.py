@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from scenarios.loader import parse_scenario
-from scenegraph.footsteps import Footstep
-from scenegraph.gait import _root_path
-from scenegraph.scene import build_scene
+from scenegraph.model.footsteps import Footstep
+from scenegraph.model.gait import _root_path
+from scenegraph.world.scene import build_scene
 
 
 def test_root_path_with_knots_at_the_same_time_is_finite():

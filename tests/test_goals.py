@@ -1,4 +1,4 @@
-"""Goals and couplings as typed records (scenegraph/goals/): one registry entry per kind of
+"""Goals and couplings as typed records (scenegraph/world/goals/): one registry entry per kind of
 the scenario language, scenario locations that travel with the records into the report, and
 the report line of a goal that does not hold."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 
 from scenarios import load_scenario, parse_scenario
 from scenarios.schema import Coupling as SchemaCoupling, Goal as SchemaGoal
-from scenegraph.goals import COUPLING_KINDS, GOAL_KINDS
-from scenegraph.scene import build_scene
-from schedules.cli_run import goal_report, violation_line
+from scenegraph.world.goals import COUPLING_KINDS, GOAL_KINDS
+from scenegraph.world.scene import build_scene
+from schedules.cli.run import goal_report, violation_line
 
 
 def _kinds(annotated) -> set[str]:
@@ -74,7 +74,7 @@ def test_every_entry_of_a_bundled_scene_has_a_where(name):
 
 
 def test_an_extra_mass_label_reaches_the_report():
-    from schedules.cli_run import extra_mass_entries
+    from schedules.cli.run import extra_mass_entries
     assert extra_mass_entries(load_scenario("suitcase"), "walker") == [
         {"handle": "palm_r", "mass": 3.0, "label": "suitcase"}]
     assert extra_mass_entries(load_scenario("walk"), "walker") == []

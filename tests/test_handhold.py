@@ -25,7 +25,7 @@ def _run(name: str, cwd: Path) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     env.pop("COMPOSE_MAX_ITER", None)
     env.pop("COMPOSE_STOP_AFTER", None)
-    res = subprocess.run([sys.executable, "-m", "schedules.cli", "run", name, "-o", "out.usda", "--report",
+    res = subprocess.run([sys.executable, "-m", "schedules.cli.main", "run", name, "-o", "out.usda", "--report",
                           "r.json", "--run-dir", "run"], cwd=cwd, env=env, capture_output=True, text=True,
                          timeout=3000)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -36,10 +36,10 @@ def palm_adaptation(name: str, run_dir: Path) -> dict[str, float]:
     """Per character: mean distance (m) of its held palm from where its uncoupled plan (the
     pre-solved initial motion) put it, over the coupled interval."""
     from scenarios import load_scenario
-    from scenegraph.motion import Motion
-    from scenegraph.scene import build_scene, handle_track
-    from schedules.checkpoints import read_all
-    from schedules.executor import _apply
+    from scenegraph.model.motion import Motion
+    from scenegraph.world.scene import build_scene, handle_track
+    from schedules.execution.checkpoints import read_all
+    from schedules.execution.executor import _apply
 
     scene = build_scene(load_scenario(name))
     initial = {}

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenegraph import heldout as H
-from scenegraph.body import JOINT_DOF_NAMES, N_DOF, N_ROOT
+from scenegraph.nio import heldout as H
+from scenegraph.model.body import JOINT_DOF_NAMES, N_DOF, N_ROOT
 
 ROOT = Path(__file__).resolve().parents[1]
 WALK_STYLE = ROOT / "scenarios" / "styles" / "walk.yaml"
@@ -133,7 +133,7 @@ def test_align_by_footfalls_maps_strikes_onto_strikes():
 # --- the command's bad inputs: located error, exit 2, nothing written -------------------------------
 
 def _run(argv):
-    from schedules.cli import main
+    from schedules.cli.main import main
 
     return main(argv)
 
@@ -216,8 +216,8 @@ def test_end_to_end_on_a_short_slice(tmp_path):
 
 
 def test_strides_per_foot_and_pooled_noise_floor():
-    from scenegraph.footsteps import Footstep
-    from schedules.cli_evaluate import _noise_floor, _strides
+    from scenegraph.model.footsteps import Footstep
+    from schedules.cli.evaluate import _noise_floor, _strides
 
     steps = [Footstep("l", (0.0, 0.0), 0.0, 0.3), Footstep("r", (0.5, 0.0), 0.5, 0.8),
              Footstep("l", (1.0, 0.0), 1.0, 1.3), Footstep("r", (1.5, 0.0), 1.5, 1.8),

@@ -13,9 +13,9 @@ from scenarios import schema
 from scenarios.errors import InputError
 from scenarios.loader import MAX_SCENARIO_BYTES, load_scenario, parse_scenario
 from scenarios.yamlio import MAX_DEPTH, MAX_NODES, parse_yaml, read_text
-from scenegraph import bvh as bvh_mod
-from scenegraph.bvh import parse_bvh, read_bvh
-from scenegraph.mocap import read_clip
+from scenegraph.mocap import bvh as bvh_mod
+from scenegraph.mocap.bvh import parse_bvh, read_bvh
+from scenegraph.mocap.clip import read_clip
 
 CLIP = Path(__file__).resolve().parents[1] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
 MINIMAL = "name: m\nduration: 1.2\ncharacters:\n  - name: a\n"
@@ -38,8 +38,8 @@ def _peak_mb(fn) -> tuple[float, BaseException | None]:
 # --- constants the language layer keeps in step with the world model ---------------------------
 
 def test_limits_agree_with_the_character_model_and_solver():
-    from scenegraph.body import PRESETS
-    from scenegraph.mocap import MAX_STATURE, MIN_STATURE
+    from scenegraph.model.body import PRESETS
+    from scenegraph.mocap.clip import MAX_STATURE, MIN_STATURE
     from scenegraph.problem.subproblem import Subproblem
 
     assert schema.PRESET_HEIGHTS == {k: p.height for k, p in PRESETS.items()}

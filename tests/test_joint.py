@@ -1,18 +1,18 @@
-"""The monolithic two-character NLP (scenegraph/joint.py) on a tiny problem: an adult and a
+"""The monolithic two-character NLP (scenegraph/problem/joint.py) on a tiny problem: an adult and a
 child standing side by side for 0.3 s, holding hands (hard coupling), the child's pelvis
 pulled away from the adult by a soft target so the hold carries a real force."""
 import numpy as np
 import pytest
 
-from scenegraph.audit import audit_motion
-from scenegraph.body import make_character
-from scenegraph.gait import initial_motion
-from scenegraph.joint import JointCoupling, coupling_times, solve_joint
-from scenegraph.kinematics import handle_positions_fn
-from scenegraph.scene import _foot_length, standing_footsteps
+from scenegraph.model.audit import audit_motion
+from scenegraph.model.body import make_character
+from scenegraph.model.gait import initial_motion
+from scenegraph.problem.joint import JointCoupling, coupling_times, solve_joint
+from scenegraph.model.kinematics import handle_positions_fn
+from scenegraph.world.scene import _foot_length, standing_footsteps
 from scenegraph.problem import HandleTarget, Subproblem
-from scenegraph.style import default_style
-from scenegraph.synthesis import presolve_kinematics
+from scenegraph.model.style import default_style
+from scenegraph.problem.synthesis import presolve_kinematics
 
 T = 0.3
 
@@ -84,7 +84,7 @@ def test_root_residual_balances_only_with_the_coupling_force(joint):
 
 
 def test_force_interpolation_and_held_timewarp_required():
-    from scenegraph.joint import _interp_matrix
+    from scenegraph.problem.joint import _interp_matrix
 
     M = _interp_matrix(np.array([0.0, 0.1, 0.2]), np.array([-0.05, 0.0, 0.05, 0.2, 0.25]))
     np.testing.assert_allclose(M, [[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0], [0, 0, 1], [0, 0, 0]])

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from scenarios.errors import InputError
-from scenegraph.body import N_DOF
-from scenegraph.bvh import (END_SUFFIX, euler_channels_to_quat, quat_slerp, quat_to_matrix,
+from scenegraph.model.body import N_DOF
+from scenegraph.mocap.bvh import (END_SUFFIX, euler_channels_to_quat, quat_slerp, quat_to_matrix,
                             read_bvh, parse_bvh)
-from scenegraph.contacts import detect_footsteps
-from scenegraph.rotations import quat_from_matrix
-from scenegraph.mocap import load_clip, load_rig, read_clip
+from scenegraph.mocap.contacts import detect_footsteps
+from scenegraph.model.rotations import quat_from_matrix
+from scenegraph.mocap.clip import load_clip, load_rig, read_clip
 
 ROOT = Path(__file__).resolve().parent.parent
 CLIPS = ROOT / "scenarios" / "clips"
@@ -80,7 +80,7 @@ def test_slerp_takes_the_short_way_through_gimbal_lock():
 
 
 def test_segments_are_rigid_over_the_clip():
-    from scenegraph.bvh import bvh_forward_kinematics, bvh_local_pose
+    from scenegraph.mocap.bvh import bvh_forward_kinematics, bvh_local_pose
 
     b = read_bvh(C0701)
     q, t = bvh_local_pose(b)
@@ -288,8 +288,8 @@ def test_retarget_other_clips(name, frames):
 # --- smooth reconstruction (Appendix A) -------------------------------------------------------
 
 def test_reconstruct_one_gait_cycle():
-    from scenegraph.body import G
-    from scenegraph.mocap import reconstruct_clip
+    from scenegraph.model.body import G
+    from scenegraph.mocap.clip import reconstruct_clip
 
     clip = load_clip(C0701, frames=(64, 201))
     rec = reconstruct_clip(clip)

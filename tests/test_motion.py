@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from scenegraph.motion import Motion, basis
+from scenegraph.model.motion import Motion, basis
 
 
 def test_basis_partition_of_unity_and_derivatives():

@@ -4,11 +4,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenegraph.body import N_JOINT, make_character
-from scenegraph.footsteps import footsteps_for_walk
-from scenegraph.gait import initial_motion
+from scenegraph.model.body import N_JOINT, make_character
+from scenegraph.model.footsteps import footsteps_for_walk
+from scenegraph.model.gait import initial_motion
 from scenegraph.nio import NIO, d_penalty, joint_rms_deg, style_from_theta
-from scenegraph.style import default_style
+from scenegraph.model.style import default_style
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +100,7 @@ def test_joint_rms_zero_for_same_motion(small):
 
 
 def test_cli_learn_bad_input(tmp_path, capsys):
-    from schedules.cli import main
+    from schedules.cli.main import main
     out = tmp_path / "s.yaml"
     assert main(["learn", "nope.bvh", "--frames", "1:60", "-o", str(out)]) == 2
     assert main(["learn", "nope.bvh", "--frames", "60", "-o", str(out)]) == 2
@@ -120,8 +120,8 @@ def test_compose_learn_end_to_end(tmp_path):
     option, and the example poses of X_T."""
     from pathlib import Path
 
-    from schedules.cli import main
-    from scenegraph.style import load_style
+    from schedules.cli.main import main
+    from scenegraph.model.style import load_style
     clip = Path(__file__).resolve().parents[1] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
     out = tmp_path / "w.yaml"
     assert main(["learn", str(clip), "--frames", "64:201", "--max-iter", "3", "--alpha-floor", "0.2",
@@ -140,7 +140,7 @@ def test_learned_header_repeats_non_default_options():
     that `compose learn` accepts."""
     import argparse
 
-    from schedules.cli_learn import _option_flags, register
+    from schedules.cli.learn import _option_flags, register
     prov = {"counterexamples": "spacetime solves of 150 IPOPT iterations", "hessian": "exact",
             "alpha_floor": 0.6 / N_JOINT}
     flags = _option_flags(prov)
@@ -155,7 +155,7 @@ def test_learned_header_repeats_non_default_options():
 def test_example_of_covers_the_gait_cycle(small):
     """The example poses a learned style carries: X_T sampled at 60 fps, every sample keyed by
     both legs' phase codes, stance and swing of each leg represented, joints copied exactly."""
-    from scenegraph.body import N_ROOT
+    from scenegraph.model.body import N_ROOT
     from scenegraph.nio import example_of
     ch, fs, m, _ = small
     codes, joints = example_of(m, fs).arrays()
@@ -177,7 +177,7 @@ def test_resample_keeps_the_motion(small):
 
 def test_flight_phase_detection():
     """Runs (flight phases) get ball-only footsteps in `compose learn`; walks keep heel and ball."""
-    from schedules.cli_learn import _has_flight
+    from schedules.cli.learn import _has_flight
     walk = footsteps_for_walk(n_steps=4)
     run = footsteps_for_walk(n_steps=4, step_length=1.0, cadence=2.8, stance_fraction=0.38, gait="run")
     assert not _has_flight(walk, walk[0].t0, walk[-1].t1)
@@ -187,7 +187,7 @@ def test_flight_phase_detection():
 @pytest.fixture(scope="module")
 def local_nio():
     """(X_T: a kinematically pre-solved walk that satisfies C, local NIO on it, θ: the default style)."""
-    from scenegraph.synthesis import presolve_kinematics
+    from scenegraph.problem.synthesis import presolve_kinematics
     ch = make_character("adult_male")
     fs = footsteps_for_walk(n_steps=3)
     d = default_style(ch.total_mass)
@@ -237,7 +237,7 @@ def test_shipped_styles_have_provenance():
     _iclone one), frames, body, versions, final G and the measured re-synthesis."""
     from pathlib import Path
 
-    from scenegraph.style import load_style
+    from scenegraph.model.style import load_style
     root = Path(__file__).resolve().parents[1] / "scenarios"
     files = sorted((root / "styles").glob("*.yaml"))
     if not files:
@@ -266,9 +266,9 @@ def test_real_resynthesis_of_shipped_walk():
     clearly (≥ 30 %) below the default style and the learned style with springs off."""
     from pathlib import Path
 
-    from schedules.cli_learn import clip_target
+    from schedules.cli.learn import clip_target
     from scenegraph.nio import resynthesize_from_example
-    from scenegraph.style import load_style
+    from scenegraph.model.style import load_style
 
     root = Path(__file__).resolve().parents[1] / "scenarios"
     walk = load_style(root / "styles" / "walk.yaml")
@@ -339,9 +339,9 @@ def synthetic_recovery(hessian: str = "gauss_newton", local: bool = True, max_it
     """The synthetic recovery experiment with the spacetime Hessian ``hessian`` in every IPOPT
     solve (X_T's pipeline, the re-syntheses; NIO's local counterexample is a Gauss–Newton step
     either way); prints and returns its numbers."""
-    from scenegraph.footsteps import footsteps_for_walk
+    from scenegraph.model.footsteps import footsteps_for_walk
     from scenegraph.problem import Subproblem, solve
-    from scenegraph.synthesis import synthesize
+    from scenegraph.problem.synthesis import synthesize
 
     ch = make_character("adult_male")
     d = default_style(ch.total_mass)

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenegraph.body import make_character
-from scenegraph.footsteps import footsteps_for_walk
-from scenegraph.gait import initial_motion
+from scenegraph.model.body import make_character
+from scenegraph.model.footsteps import footsteps_for_walk
+from scenegraph.model.gait import initial_motion
 from scenegraph.nio import NIO
 from scenegraph.nio.counterexamples import nlp_params
-from scenegraph.style import N_THETA_FULL, THETA_LAYOUT, Style, default_style
+from scenegraph.model.style import N_THETA_FULL, THETA_LAYOUT, Style, default_style
 
 
 @pytest.fixture(scope="module")

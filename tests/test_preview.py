@@ -10,11 +10,11 @@ pytest.importorskip("matplotlib")
 pytest.importorskip("pxr")
 
 from scenarios.errors import InputError  # noqa: E402
-from scenegraph import preview  # noqa: E402
-from scenegraph.body import make_character, standing_pose  # noqa: E402
-from scenegraph.bvh_export import export_bvh  # noqa: E402
-from scenegraph.usd_export import CharacterTrack, Marker, export_usd  # noqa: E402
-from schedules.cli import main  # noqa: E402
+from scenegraph.export import preview  # noqa: E402
+from scenegraph.model.body import make_character, standing_pose  # noqa: E402
+from scenegraph.export.bvh import export_bvh  # noqa: E402
+from scenegraph.export.usd import CharacterTrack, Marker, export_usd  # noqa: E402
+from schedules.cli.main import main  # noqa: E402
 
 FPS = 20.0
 

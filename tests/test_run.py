@@ -23,13 +23,13 @@ def compose(*args, cwd, env=None, timeout=1500):
     e.pop("COMPOSE_MAX_ITER", None)
     e["PYTHONPATH"] = str(ROOT) + os.pathsep + e.get("PYTHONPATH", "")
     e.update(env or {})
-    return subprocess.run([sys.executable, "-m", "schedules.cli", "run", *map(str, args)], cwd=cwd, env=e,
+    return subprocess.run([sys.executable, "-m", "schedules.cli.main", "run", *map(str, args)], cwd=cwd, env=e,
                           capture_output=True, text=True, timeout=timeout)
 
 
 def final_motions(run_dir: Path) -> dict:
     """{character: (ctrl, warp)} after the last checkpoint that touched each character."""
-    from schedules.checkpoints import read_all
+    from schedules.execution.checkpoints import read_all
 
     out = {}
     for name, d in read_all(run_dir).items():  # verified against the manifest's SHA-256
@@ -42,9 +42,9 @@ def final_motions(run_dir: Path) -> dict:
 
 def tracks_from_run(name: str, run_dir: Path, fps: float):
     from scenarios.loader import load_scenario
-    from scenegraph.motion import Motion
-    from scenegraph.scene import build_scene
-    from scenegraph.usd_export import CharacterTrack
+    from scenegraph.model.motion import Motion
+    from scenegraph.world.scene import build_scene
+    from scenegraph.export.usd import CharacterTrack
 
     scene = build_scene(load_scenario(name))
     tracks = []
@@ -63,7 +63,7 @@ def walk_run(tmp_path_factory):
 
 
 def test_walk_end_to_end(walk_run):
-    from scenegraph.usd_export import readback_errors
+    from scenegraph.export.usd import readback_errors
 
     d, res = walk_run
     assert res.returncode == 0, res.stderr[-3000:]
@@ -114,7 +114,7 @@ def _accepted(step: dict) -> bool:
     """The executor's policy, read from the report: a full step succeeds or is kept at its
     iteration cap with every hard constraint held; a timing step (a warm start) succeeds or is
     reported as discarded."""
-    from schedules.executor import VIOLATION_TOL
+    from schedules.execution.executor import VIOLATION_TOL
     if step["kind"] == "full":
         return step["success"] or (step["status"] == "Maximum_Iterations_Exceeded"
                                    and all(v <= VIOLATION_TOL for v in step["violations"].values()))
@@ -190,7 +190,7 @@ def test_two_walkers_jobs_2_equals_jobs_1(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["walk_to", "two_walkers", "walk_to_run"])
 def test_bundled_scenarios_run_end_to_end(name, tmp_path):
-    from scenegraph.usd_export import readback_errors
+    from scenegraph.export.usd import readback_errors
 
     res = compose(name, "-o", f"{name}.usda", "--report", "r.json", "--run-dir", "run", cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -214,7 +214,7 @@ def test_scene_units_and_edits():
     import math
 
     from scenarios.loader import load_scenario
-    from scenegraph.scene import build_scene, walk_footsteps
+    from scenegraph.world.scene import build_scene, walk_footsteps
 
     scene = build_scene(load_scenario("tackle"))
     assert scene.character("dodger").start[2] == pytest.approx(math.pi / 2)
@@ -232,7 +232,7 @@ def test_exit_code_follows_every_goal_expected_to_hold(monkeypatch):
     adversarial goal expected to fail by design (the other side plans last) does not decide it."""
     import argparse
 
-    from schedules import cli_run
+    from schedules.cli import run as cli_run
 
     ok = {"holds": True}
     walk_fail = {"type": "walk_to", "holds": False, "measured": 0.4, "tolerance": 0.05}

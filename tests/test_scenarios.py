@@ -17,8 +17,8 @@ import scenarios.bundled as bundled
 from scenarios import (BODY_PRESETS, HANDLE_NAMES, JOINT_DOF_NAMES, JOINT_NAMES, InputError, Scenario,
                        bundled_scenarios, bundled_styles, load_scenario, parse_scenario, scenario_json_schema)
 from scenarios.schema import joint_dofs
-from schedules.cli import main
-from schedules.cli_scenario import check_scenario
+from schedules.cli.main import main
+from schedules.cli.scenario import check_scenario
 
 HERE = Path(__file__).resolve().parent
 BAD = sorted((HERE / "bad_inputs").glob("*.yaml"))
@@ -29,7 +29,7 @@ BUNDLED = list(bundled_scenarios())
 # --- names shared with the character model ------------------------------------------------------
 
 def test_names_agree_with_character_model():
-    from scenegraph.body import JOINT_DOF_NAMES as SG_DOFS, PRESETS, make_character
+    from scenegraph.model.body import JOINT_DOF_NAMES as SG_DOFS, PRESETS, make_character
     assert JOINT_DOF_NAMES == SG_DOFS
     assert set(BODY_PRESETS) == set(PRESETS)
     for preset in BODY_PRESETS:
@@ -115,8 +115,8 @@ def test_minimal_scenario_defaults():
     assert c.style == "default" and c.start.position == (0.0, 0.0) and c.start.heading == 0.0
     assert c.body.shoe_stiffness_scale == 1.0 and not c.body.extra_masses
     assert scn.timing == "fixed" and scn.goals == [] and scn.couplings == [] and scn.schedule is None
-    # the default μ is the model's (scenegraph.dynamics.MU, what the solver always used on flat ground)
-    from scenegraph.dynamics import MU
+    # the default μ is the model's (scenegraph.model.dynamics.MU, what the solver always used on flat ground)
+    from scenegraph.model.dynamics import MU
     assert scn.environment.ground.friction == MU and scn.environment.slopes == []
     assert scn.style_file("default") is None
 
@@ -225,7 +225,7 @@ def test_cross_field_errors_are_all_listed(tmp_path):
 # --- style paths ----------------------------------------------------------------------------------
 
 def _write_style(path: Path):
-    from scenegraph.style import default_style, save_style
+    from scenegraph.model.style import default_style, save_style
     save_style(default_style(), path)
 
 
@@ -312,7 +312,7 @@ def test_bad_input_rejected_with_line_and_field(path, tmp_path, monkeypatch, cap
 def test_validate_reports_every_file_and_exit_code_through_console_script(tmp_path):
     good = bundled_scenarios()["walk"]
     bad = [p for p in BAD if p.stem in ("unknown_style", "duration_negative")]
-    res = subprocess.run([sys.executable, "-m", "schedules.cli", "validate", str(good), *map(str, bad)],
+    res = subprocess.run([sys.executable, "-m", "schedules.cli.main", "validate", str(good), *map(str, bad)],
                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert res.returncode == 2
     assert "ok: " in res.stdout
@@ -351,7 +351,7 @@ def test_gait_change_generates_walk_then_run_footsteps():
     """`style_change` with `gait: run`: double support before the change, flight phases and
     quicker, longer steps after it; the footsteps still reach the walk_to target."""
     from scenarios.loader import load_scenario
-    from scenegraph.scene import build_scene
+    from scenegraph.world.scene import build_scene
 
     scene = build_scene(load_scenario("walk_to_run"))
     steps = sorted(scene.characters[0].footsteps, key=lambda f: f.t0)
@@ -371,10 +371,10 @@ def test_initial_motion_from_the_styles_example(tmp_path):
     """`initial_motion: example` takes the initial guess's joint angles from the poses the
     learned style carries (matched by leg phase, paper §7); the generator's differ.  A style
     without example poses is an input error at that field's line."""
-    from scenegraph.body import N_ROOT
-    from scenegraph.gait import leg_phase, phase_code
-    from scenegraph.scene import build_scene
-    from scenegraph.style import load_style
+    from scenegraph.model.body import N_ROOT
+    from scenegraph.model.gait import leg_phase, phase_code
+    from scenegraph.world.scene import build_scene
+    from scenegraph.model.style import load_style
 
     text = (bundled.BUNDLED_DIR / "walk.yaml").read_text()
     assert "    style: walk\n" in text

@@ -4,12 +4,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from scenegraph.body import make_character
-from scenegraph.footsteps import footsteps_for_walk
-from scenegraph.gait import initial_motion
+from scenegraph.model.body import make_character
+from scenegraph.model.footsteps import footsteps_for_walk
+from scenegraph.model.gait import initial_motion
 from scenegraph.problem import Subproblem, solve
-from scenegraph.style import default_style
-from scenegraph.synthesis import presolve_kinematics, synthesize
+from scenegraph.model.style import default_style
+from scenegraph.problem.synthesis import presolve_kinematics, synthesize
 
 CH = make_character()
 STYLE = default_style(CH.total_mass)
@@ -114,8 +114,8 @@ def test_spring_force_enters_the_dynamics():
     """A physical spring (rubber-band coupling) pulls the right palm toward a moving anchor:
     the solver's force is k (anchor − palm) at every collocation point, and the independent
     audit balances the equations of motion only when that force is counted."""
-    from scenegraph.audit import audit_motion
-    from scenegraph.kinematics import handle_positions_fn
+    from scenegraph.model.audit import audit_motion
+    from scenegraph.model.kinematics import handle_positions_fn
     from scenegraph.problem import Spring
 
     steps = footsteps_for_walk()
@@ -222,7 +222,7 @@ def test_window_only_and_open_end_transcription(small_window):
     whose q, q̇ or q̈ a free control point reaches (the dynamics elsewhere are constants);
     ``open_end`` also frees the control points straddling the window's end and keeps no
     point past it."""
-    from scenegraph.motion import basis
+    from scenegraph.model.motion import basis
     from scenegraph.problem import transcribe, window_mask
 
     steps, m0, window = small_window
@@ -255,7 +255,7 @@ def test_named_layout_and_solve_timing(small_window):
     """The NLP names its x/p slices (NIO and the joint problem substitute parameters by name),
     and a solve reports where its wall time went."""
     from scenegraph.problem import make_solver, transcribe
-    from scenegraph.residual import theta_kernel_vector
+    from scenegraph.model.residual import theta_kernel_vector
 
     steps, m0, window = small_window
     nlp = transcribe(Subproblem(CH, STYLE, m0, steps, window=window, free=frozenset({"q"}), max_iter=3,

@@ -321,7 +321,7 @@ def test_overlap_between_characters_and_groups(tmp_path):
 # --- the command -----------------------------------------------------------------------------
 
 def _cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "schedules.cli", "audit", *map(str, args)], cwd=cwd or ROOT,
+    return subprocess.run([sys.executable, "-m", "schedules.cli.main", "audit", *map(str, args)], cwd=cwd or ROOT,
                           capture_output=True, text=True, timeout=300,
                           env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
 

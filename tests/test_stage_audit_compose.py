@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from scenegraph.body import PRESETS, drawn_shapes, make_character, standing_pose
-from scenegraph.kinematics import numeric_fk
+from scenegraph.model.body import PRESETS, drawn_shapes, make_character, standing_pose
+from scenegraph.model.kinematics import numeric_fk
 from scenegraph.stage_audit import audit_stage, read_stage
-from scenegraph.usd_export import CharacterTrack, build_stage, export_usd
+from scenegraph.export.usd import CharacterTrack, build_stage, export_usd
 
 pxr = pytest.importorskip("pxr")
 
@@ -128,8 +128,8 @@ def test_stage_carries_the_suitcase_and_the_true_mass(tmp_path):
 def test_ramps_preview_at_their_height_and_audit_on_them(tmp_path):
     """A standing figure on a 10° ramp: the preview draws the ramp's top where the ramp is
     (not flat, not as a marker) and the auditor measures heights above the ramp."""
-    from scenegraph import preview
-    from scenegraph.ground import Ground, Plane
+    from scenegraph.export import preview
+    from scenegraph.model.ground import Ground, Plane
     ramp = Plane(math.radians(10.0), 0.0, (-1.0, -1.0, 2.0, 1.0), (-1.0, 0.0), name="ramp")
     ground = Ground(planes=(ramp,))
     ch = make_character()
@@ -157,14 +157,14 @@ def test_ramps_preview_at_their_height_and_audit_on_them(tmp_path):
 
 
 def test_run_hook_audits_a_120hz_stage_with_compose_forces(tmp_path):
-    """schedules.run_audit (what compose run calls after writing its stage), on the bundled
+    """schedules.execution.run_audit (what compose run calls after writing its stage), on the bundled
     handhold scene's initial motions (no solve): the 120 Hz stage is written with the hands'
     asked-for contact and the forces, and the verdict comes back for the report."""
     import io
     from pxr import Usd
     from scenarios.loader import load_scenario
-    from scenegraph.scene import build_scene
-    from schedules.run_audit import allowed_contacts, audit_run_stage
+    from scenegraph.world.scene import build_scene
+    from schedules.execution.run_audit import allowed_contacts, audit_run_stage
     scene = build_scene(load_scenario("handhold"))
     allowed = allowed_contacts(scene)
     assert allowed and all("hand" in a for a in allowed)
@@ -186,7 +186,7 @@ def test_run_hook_audits_a_120hz_stage_with_compose_forces(tmp_path):
 
 
 def test_solver_forces_are_interpolated_within_contact_runs_only():
-    from schedules.run_audit import _interp_runs
+    from schedules.execution.run_audit import _interp_runs
     t = np.arange(0, 1.0001, 0.05)
     ht = np.array([0.0, 0.1, 0.2, 0.3, 0.7, 0.8, 0.9])  # two contact runs, a swing between
     hf = np.stack([np.zeros(7), np.zeros(7), ht * 100], 1)
@@ -195,7 +195,7 @@ def test_solver_forces_are_interpolated_within_contact_runs_only():
 
 
 def test_preview_draws_the_carried_suitcase_from_the_stage_as_from_the_tracks(tmp_path):
-    from scenegraph import preview
+    from scenegraph.export import preview
     ch = make_character().with_extra_mass("palm_r", 3.0)
     tracks = [CharacterTrack("walker", ch, np.tile(standing_pose(ch), (3, 1)))]
     path = export_usd(tmp_path / "s.usda", tracks, 30.0)

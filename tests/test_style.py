@@ -9,8 +9,8 @@ import pytest
 import yaml
 
 from scenarios.errors import InputError
-from scenegraph.body import JOINT_DOF_NAMES, N_JOINT
-from scenegraph.style import PER_DOF_FIELDS, Style, default_style, load_style, save_style
+from scenegraph.model.body import JOINT_DOF_NAMES, N_JOINT
+from scenegraph.model.style import PER_DOF_FIELDS, Style, default_style, load_style, save_style
 
 
 def test_default_style_is_valid():
@@ -46,7 +46,7 @@ def test_yaml_round_trip(tmp_path):
 def test_example_poses_round_trip_and_bad_example(tmp_path):
     """A learned style's example poses (phase codes and joint angles) survive save and load; a
     malformed example block fails with the file, its line and the field."""
-    from scenegraph.style import ExamplePoses
+    from scenegraph.model.style import ExamplePoses
     rng = np.random.default_rng(3)
     codes = rng.uniform(0, 2, (12, 2))
     joints = rng.uniform(-1, 1, (12, N_JOINT))
@@ -175,9 +175,9 @@ def test_style_is_immutable():
 def test_learned_style_scales_its_springs_to_the_body_it_is_used_on():
     """A style learned on adult_male (73 kg) used on the child preset (23 kg): springs, damping and
     shoe scale by 23/73, as the default style's do; α, q̄ and h̄ carry over; same body: unchanged."""
-    from scenegraph.body import make_character
-    from scenegraph.scene import scale_style_to_body
-    from scenegraph.style import Provenance
+    from scenegraph.model.body import make_character
+    from scenegraph.world.scene import scale_style_to_body
+    from scenegraph.model.style import Provenance
 
     learned = default_style(73.0).with_(name="w", q_rest=np.full(N_JOINT, 0.1),
                                         provenance=Provenance(clip="c.bvh", body="adult_male"))

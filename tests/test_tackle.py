@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 from scenarios import load_scenario, parse_scenario
-from scenegraph.motion import Motion
-from scenegraph.goals import Avoid, Tackle
-from scenegraph.scene import (TACKLE_CONTACT_TOL, adversarial_plans_last, avoid_measure, body_frames,
+from scenegraph.model.motion import Motion
+from scenegraph.world.goals import Avoid, Tackle
+from scenegraph.world.scene import (TACKLE_CONTACT_TOL, adversarial_plans_last, avoid_measure, body_frames,
                               build_scene, chest_front, goal_targets, reach_budget, tackle_measure, torso_distance)
-from schedules.cli_run import avoid_entry, goal_verdict, tackle_entry
+from schedules.cli.run import avoid_entry, goal_verdict, tackle_entry
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -98,7 +98,7 @@ def test_targets_respect_the_reaction_time_budget(scene):
     targets, hard = goal_targets(far, "tackler", ["hit"], window=(0.75, 1.0))
     assert not hard
     chest = [t for t in targets if t.handle == "chest" and t.t == 1.0][0]
-    from scenegraph.scene import handle_track
+    from scenegraph.world.scene import handle_track
     now = handle_track(him, "chest", [1.0])[0]
     assert np.linalg.norm(np.asarray(chest.point) - now) == pytest.approx(0.03125, abs=1e-6)
     handles = sorted(t.handle for t in targets)
@@ -210,7 +210,7 @@ def test_bundled_goals_know_who_wins():
 
 def _run(name: str, tmp_path: Path, *extra: str) -> tuple[subprocess.CompletedProcess, dict]:
     env = dict(os.environ)
-    res = subprocess.run([sys.executable, "-m", "schedules.cli", "run", name, "--report", "r.json",
+    res = subprocess.run([sys.executable, "-m", "schedules.cli.main", "run", name, "--report", "r.json",
                           "-o", f"{name}.usda", "--run-dir", "run", *extra], cwd=tmp_path, env=env,
                          capture_output=True, text=True)
     rep = json.loads((tmp_path / "r.json").read_text()) if (tmp_path / "r.json").exists() else {}

@@ -21,11 +21,11 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
 
 from scenarios.errors import ComposeError, InputError  # noqa: E402
-from scenegraph.body import drawn_shapes, make_character, standing_pose  # noqa: E402
-from scenegraph.kinematics import numeric_fk  # noqa: E402
-from scenegraph.rotations import quat_from_matrix  # noqa: E402
-from scenegraph import usd_export  # noqa: E402
-from scenegraph.usd_export import (CharacterTrack, ForceArrow, Marker, export_usd, joint_paths,  # noqa: E402
+from scenegraph.model.body import drawn_shapes, make_character, standing_pose  # noqa: E402
+from scenegraph.model.kinematics import numeric_fk  # noqa: E402
+from scenegraph.model.rotations import quat_from_matrix  # noqa: E402
+from scenegraph.export import usd as usd_export  # noqa: E402
+from scenegraph.export.usd import (CharacterTrack, ForceArrow, Marker, export_usd, joint_paths,  # noqa: E402
                                    validate_stage)
 
 GOLDEN = Path(__file__).parent / "golden" / "two_characters.usda"

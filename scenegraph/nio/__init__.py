@@ -28,12 +28,12 @@ Measured (local counterexamples): synthetic G 9.0e-4 → 1.7e-5 (54×) with the 
 recovered but not α; 07_01 G 1.09 → 0.030 in 121 iterations (~200 s).  What it does not
 give: X_T as the optimum of a long re-synthesis (docs/learning.md).
 """
-from .learn import initial_style, learn_style
-from .problem import NIO
-from .records import IterationRecord, NIOResult
-from .resynthesis import example_of, resynthesize_from_example
-from .target import feasible_target, joint_rms_deg, resample
-from .theta import D_WEIGHT, N_THETA_FULL, d_penalty, style_from_theta
+from scenegraph.nio.learn import initial_style, learn_style
+from scenegraph.nio.problem import NIO
+from scenegraph.nio.records import IterationRecord, NIOResult
+from scenegraph.nio.resynthesis import example_of, resynthesize_from_example
+from scenegraph.nio.target import feasible_target, joint_rms_deg, resample
+from scenegraph.nio.theta import D_WEIGHT, N_THETA_FULL, d_penalty, style_from_theta
 
 __all__ = ["NIO", "NIOResult", "IterationRecord", "learn_style", "initial_style", "joint_rms_deg",
            "resynthesize_from_example", "example_of", "feasible_target", "resample", "style_from_theta",

@@ -12,9 +12,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..motion import Motion
-from .records import History, IterationRecord, NIOResult, Problem
-from .theta import ALPHA, project, style_from_theta, theta_bounds, theta_scales
+from scenegraph.model.motion import Motion
+from scenegraph.nio.records import History, IterationRecord, NIOResult, Problem
+from scenegraph.nio.theta import ALPHA, project, style_from_theta, theta_bounds, theta_scales
 
 __all__ = ["run_bundle", "model_step", "cut"]
 

@@ -23,9 +23,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..motion import Motion
-from ..problem import NLP, Built, IterationCallback, Result, Subproblem, make_solver, solve, transcribe, violations
-from .theta import ALPHA, KERNEL
+from scenegraph.model.motion import Motion
+from scenegraph.problem import NLP, Built, IterationCallback, Result, Subproblem, make_solver, solve, transcribe, violations
+from scenegraph.nio.theta import ALPHA, KERNEL
 
 __all__ = ["WARM_START", "BestIterate", "Counterexamples", "nlp_params"]
 

@@ -18,12 +18,12 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import nnls
 
-from ..body import G, N_DOF, N_JOINT, N_ROOT, Character
-from ..dynamics import friction_basis
-from ..motion import Motion
-from ..problem import NLP, OBJ_SCALE
-from ..residual import FORCE_HANDLES, W_ROOT, residual_kernel
-from .theta import ALPHA, KERNEL, N_THETA_FULL
+from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, Character
+from scenegraph.model.dynamics import friction_basis
+from scenegraph.model.motion import Motion
+from scenegraph.problem import NLP, OBJ_SCALE
+from scenegraph.model.residual import FORCE_HANDLES, W_ROOT, residual_kernel
+from scenegraph.nio.theta import ALPHA, KERNEL, N_THETA_FULL
 
 __all__ = ["EnergyModel", "LAM_REG", "force_jacobian"]
 

@@ -10,8 +10,8 @@ from typing import Callable
 
 import numpy as np
 
-from .records import Evaluation, History, IterationRecord, NIOResult, Problem
-from .theta import project, style_from_theta, theta_scales
+from scenegraph.nio.records import Evaluation, History, IterationRecord, NIOResult, Problem
+from scenegraph.nio.theta import project, style_from_theta, theta_scales
 
 __all__ = ["run_gradient"]
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
-from ..body import N_JOINT, N_ROOT
-from ..motion import Motion
-from ..residual import residual_kernel
-from ..style import THETA_LAYOUT, Style, default_style
-from .energy import EnergyModel
-from .theta import ALPHA, KERNEL, Q_REST, SPRINGS, project
+from scenegraph.model.body import N_JOINT, N_ROOT
+from scenegraph.model.motion import Motion
+from scenegraph.model.residual import residual_kernel
+from scenegraph.model.style import THETA_LAYOUT, Style, default_style
+from scenegraph.nio.energy import EnergyModel
+from scenegraph.nio.theta import ALPHA, KERNEL, Q_REST, SPRINGS, project
 
 __all__ = ["initial_theta", "fit_springs"]
 

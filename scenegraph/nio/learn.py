@@ -6,14 +6,14 @@ from dataclasses import replace
 
 from scenarios.versions import package_versions
 
-from ..body import Character
-from ..footsteps import Footstep
-from ..motion import Motion
-from ..style import Provenance, Style
-from .problem import NIO
-from .records import NIOResult
-from .resynthesis import example_of
-from .theta import style_from_theta
+from scenegraph.model.body import Character
+from scenegraph.model.footsteps import Footstep
+from scenegraph.model.motion import Motion
+from scenegraph.model.style import Provenance, Style
+from scenegraph.nio.problem import NIO
+from scenegraph.nio.records import NIOResult
+from scenegraph.nio.resynthesis import example_of
+from scenegraph.nio.theta import style_from_theta
 
 __all__ = ["learn_style", "initial_style"]
 

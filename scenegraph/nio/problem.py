@@ -7,18 +7,18 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..body import Character
-from ..footsteps import Footstep
-from ..motion import Motion
-from ..problem import Result, Subproblem, build, solve
-from ..style import Style, default_style
-from .bundle import run_bundle
-from .counterexamples import LOCAL_STEPS, WARM_START, Counterexamples
-from .energy import EnergyModel
-from .gradient import run_gradient
-from .initial import initial_theta
-from .records import Evaluation, NIOResult
-from .theta import d_penalty
+from scenegraph.model.body import Character
+from scenegraph.model.footsteps import Footstep
+from scenegraph.model.motion import Motion
+from scenegraph.problem import Result, Subproblem, build, solve
+from scenegraph.model.style import Style, default_style
+from scenegraph.nio.bundle import run_bundle
+from scenegraph.nio.counterexamples import LOCAL_STEPS, WARM_START, Counterexamples
+from scenegraph.nio.energy import EnergyModel
+from scenegraph.nio.gradient import run_gradient
+from scenegraph.nio.initial import initial_theta
+from scenegraph.nio.records import Evaluation, NIOResult
+from scenegraph.nio.theta import d_penalty
 
 __all__ = ["NIO"]
 

@@ -10,9 +10,9 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from ..motion import Motion
-from ..problem import Result
-from ..style import Style
+from scenegraph.model.motion import Motion
+from scenegraph.problem import Result
+from scenegraph.model.style import Style
 
 __all__ = ["IterationRecord", "NIOResult", "Evaluation", "History", "Problem"]
 

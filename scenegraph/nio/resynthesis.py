@@ -1,11 +1,11 @@
 """The example poses a learned style carries, and the paper's re-synthesis check from them."""
 from __future__ import annotations
 
-from ..body import N_ROOT, Character
-from ..footsteps import Footstep
-from ..motion import Motion
-from ..problem import Result
-from ..style import ExamplePoses, Style
+from scenegraph.model.body import N_ROOT, Character
+from scenegraph.model.footsteps import Footstep
+from scenegraph.model.motion import Motion
+from scenegraph.problem import Result
+from scenegraph.model.style import ExamplePoses, Style
 
 __all__ = ["example_of", "resynthesize_from_example"]
 
@@ -15,7 +15,7 @@ def example_of(target: Motion, footsteps: tuple[Footstep, ...], fps: float = 60.
     phase under its footsteps (the paper's initial motions for new footsteps, §7).  The poses
     are copied, not interpolated, so the rate matters: the initial motion for 07_01's own
     footprints is 1.11° from X_T at 60 fps, 1.80° at 30 fps."""
-    from ..gait import example_poses
+    from scenegraph.model.gait import example_poses
 
     t, q = target.sample(fps)
     return ExamplePoses.from_arrays(*example_poses(tuple(footsteps), t, q[:, N_ROOT:]))
@@ -30,7 +30,7 @@ def resynthesize_from_example(ch: Character, target: Motion, footsteps: tuple[Fo
     solve of ``max_iter`` iterations) with ``style`` and the same ``footsteps``.  For X_T's own
     footprints the initial motion is close to X_T up to its root (0.42–1.11° joint RMS on the
     four shipped clips).  The poses are those a learned style carries (:func:`example_of`)."""
-    from ..synthesis import synthesize
+    from scenegraph.problem.synthesis import synthesize
 
     return synthesize(ch, style, tuple(footsteps), target.start, target.end,
                       example=example_of(target, footsteps).arrays(), max_iter=max_iter, hessian=hessian).result

@@ -3,11 +3,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..body import N_ROOT, Character
-from ..footsteps import Footstep
-from ..motion import Motion
-from ..problem import PoseTarget, Result, Subproblem, build, solve
-from ..style import default_style
+from scenegraph.model.body import N_ROOT, Character
+from scenegraph.model.footsteps import Footstep
+from scenegraph.model.motion import Motion
+from scenegraph.problem import PoseTarget, Result, Subproblem, build, solve
+from scenegraph.model.style import default_style
 
 __all__ = ["feasible_target", "resample", "joint_rms_deg"]
 

@@ -1,7 +1,7 @@
 """The style vector θ as NIO sees it: bounds, projection, the penalty D (Eq. 18), scales.
 
 θ is :meth:`Style.vector` (147 numbers); its parts are read by name through
-:data:`scenegraph.style.THETA_LAYOUT` (α, the springs ks1/ks2/kd, q_rest, k_shoe, h_rest).
+:data:`scenegraph.model.style.THETA_LAYOUT` (α, the springs ks1/ks2/kd, q_rest, k_shoe, h_rest).
 Units are those of :class:`Style`: α dimensionless, stiffnesses N·m/rad, damping N·m·s/rad,
 rest angles rad, shoe stiffness N/m, shoe rest length m.
 """
@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..body import N_JOINT
-from ..style import N_THETA_FULL, THETA_LAYOUT, Provenance, Style, default_style
+from scenegraph.model.body import N_JOINT
+from scenegraph.model.style import N_THETA_FULL, THETA_LAYOUT, Provenance, Style, default_style
 
 __all__ = ["D_WEIGHT", "N_THETA_FULL", "theta_bounds", "project", "style_from_theta", "d_penalty", "theta_scales"]
 

@@ -5,13 +5,13 @@
 - :mod:`.solver`: how the NLP is solved (IPOPT options, iteration callbacks, ``make_solver``, ``solve``);
 - :mod:`.result`: what comes out (``Result``, ``SolveTiming``, ``read_solution``, ``violations``).
 
-The physics kernels the transcription evaluates live below, in :mod:`scenegraph.residual`.
+The physics kernels the transcription evaluates live below, in :mod:`scenegraph.model.residual`.
 """
-from .result import Result, SolveTiming, read_solution, violations
-from .solver import (STALL_RATE, STALL_VIOL, Built, IterationCallback, StallMonitor, build, create_nlpsol,
+from scenegraph.problem.result import Result, SolveTiming, read_solution, violations
+from scenegraph.problem.solver import (STALL_RATE, STALL_VIOL, Built, IterationCallback, StallMonitor, build, create_nlpsol,
                      make_solver, solve, solver_options)
-from .subproblem import HESSIAN_MODES, Avoid, HandleTarget, PoseTarget, Spring, Subproblem
-from .transcription import KIN_WEIGHT, NLP, OBJ_SCALE, transcribe, window_mask
+from scenegraph.problem.subproblem import HESSIAN_MODES, Avoid, HandleTarget, PoseTarget, Spring, Subproblem
+from scenegraph.problem.transcription import KIN_WEIGHT, NLP, OBJ_SCALE, transcribe, window_mask
 
 __all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Spring", "Avoid", "HESSIAN_MODES",
            "NLP", "transcribe", "window_mask", "OBJ_SCALE", "KIN_WEIGHT",

@@ -12,11 +12,11 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from ..body import G
-from ..dynamics import friction_basis
-from ..footsteps import Footstep
-from ..motion import Motion
-from .transcription import NLP
+from scenegraph.model.body import G
+from scenegraph.model.dynamics import friction_basis
+from scenegraph.model.footsteps import Footstep
+from scenegraph.model.motion import Motion
+from scenegraph.problem.transcription import NLP
 
 __all__ = ["Result", "SolveTiming", "read_solution", "violations"]
 

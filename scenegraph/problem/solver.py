@@ -17,9 +17,9 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from .result import Result, SolveTiming, read_solution, violations
-from .subproblem import Subproblem
-from .transcription import NLP, transcribe
+from scenegraph.problem.result import Result, SolveTiming, read_solution, violations
+from scenegraph.problem.subproblem import Subproblem
+from scenegraph.problem.transcription import NLP, transcribe
 
 __all__ = ["Built", "IterationCallback", "StallMonitor", "STALL_RATE", "STALL_VIOL", "solver_options",
            "create_nlpsol", "make_solver", "build", "solve"]

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..body import Character
-from ..footsteps import Footstep
-from ..ground import FLAT, Ground
-from ..motion import Motion
-from ..style import Style
+from scenegraph.model.body import Character
+from scenegraph.model.footsteps import Footstep
+from scenegraph.model.ground import FLAT, Ground
+from scenegraph.model.motion import Motion
+from scenegraph.model.style import Style
 
 __all__ = ["Subproblem", "HandleTarget", "PoseTarget", "Spring", "Avoid", "HESSIAN_MODES"]
 

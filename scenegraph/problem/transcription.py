@@ -17,7 +17,7 @@ is a sum of squares of residuals computed by one per-point kernel (inverse dynam
 passive, contact and shoe terms) that is compiled to C with its first derivatives.
 IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals) plus the exact Hessian of
 the kinematic constraints by default; ``Subproblem(hessian="exact")`` adds the residual
-curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`~scenegraph.residual.kernel_hessian`, chained
+curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`~scenegraph.model.residual.kernel_hessian`, chained
 through the splines; see README "Exact Hessian" for what it measured).  Style θ and all
 fixed data are NLP parameters, so one built problem serves many solves (NIO).
 
@@ -43,12 +43,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..body import G, N_DOF, N_JOINT, N_ROOT, Character
-from ..footsteps import Footstep, contact_points
-from ..motion import basis
-from ..residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
+from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, Character
+from scenegraph.model.footsteps import Footstep, contact_points
+from scenegraph.model.motion import basis
+from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
-from .subproblem import HESSIAN_MODES, Subproblem
+from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
 __all__ = ["NLP", "transcribe", "window_mask", "OBJ_SCALE", "KIN_WEIGHT", "FREE_WEIGHT_MIN"]
 
@@ -64,7 +64,7 @@ class NLP:
     Symbols and expressions (MX) for the solver, numeric data (bounds, start ``x0``, the
     parameter values ``p0`` of ``sp``), the named layout of x and p, and what is needed to
     read a solution (:func:`.result.read_solution`) or to combine several NLPs into one
-    (``scenegraph/joint.py``).
+    (``scenegraph/problem/joint.py``).
     """
 
     sp: Subproblem
@@ -93,7 +93,7 @@ class NLP:
     free_steps: list  # indices into sp.footsteps of the free footprints, in x order
     contact_basis: tuple = ()  # friction pyramid V (3×4, world) per contact_index entry
     spring_handles: tuple = ()  # handle of each Subproblem.springs entry, in order
-    # the transcription's pieces, for problems that combine several NLPs (scenegraph/joint.py):
+    # the transcription's pieces, for problems that combine several NLPs (scenegraph/problem/joint.py):
     rho_dyn_fn: ca.Function | None = None  # x, p -> dynamics residuals (objective = |rho_dyn|² + |rho_extra|²)
     rho_extra_fn: ca.Function | None = None  # x, p -> the other least-squares residuals (SX-expandable)
     ctrl_fn: ca.Function | None = None  # x, p -> control points (K × 35)
@@ -323,7 +323,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     TH = ca.MX.sym("theta", N_THETA, N)
     SA = ca.MX.sym("sqrt_alpha", N_JOINT, N)
     # spring anchors (3, N each, at the collocation points) are parameters too, so a joint problem
-    # can substitute them (scenegraph/joint.py: anchor = own handle + F / k makes the force F)
+    # can substitute them (scenegraph/problem/joint.py: anchor = own handle + F / k makes the force F)
     A_sym = [ca.MX.sym(f"anchor_{j}", 3, N) for j in range(len(sp.springs))]
     p = ca.vertcat(P_fixed, W_fixed, *[ca.vec(a) for a in A_sym], ca.vec(TH), ca.vec(SA))
     n_fixed = K * N_DOF + nW  # offset of the anchors in p

@@ -5,8 +5,9 @@ It reads only the stage — joint transforms and skinned meshes through UsdSkel,
 residual kernels (tests/test_architecture.py enforces it): it is the check of them.
 See docs/audit.md for what is measured and the tolerances.
 """
-from .reader import DEFAULT_DENSITY, read_stage
-from .verdict import SUMMARY_KEYS, AuditSettings, Tolerances, audit_samples, audit_stage
+from scenegraph.stage_audit.reader import DEFAULT_DENSITY, read_stage
+from scenegraph.stage_audit.verdict import (SUMMARY_KEYS, AuditSettings, Tolerances, audit_samples, audit_stage,
+                                            summary_line)
 
-__all__ = ["audit_stage", "audit_samples", "read_stage", "AuditSettings", "Tolerances", "SUMMARY_KEYS",
+__all__ = ["audit_stage", "audit_samples", "read_stage", "AuditSettings", "Tolerances", "SUMMARY_KEYS", "summary_line",
            "DEFAULT_DENSITY"]

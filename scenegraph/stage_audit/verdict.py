@@ -15,11 +15,11 @@ import numpy as np
 
 from scenarios.errors import InputError
 
-from .checks import contact_support, heights_above_ground, overlaps, stance_runs
-from .momenta import G, momenta
-from .reader import StageSamples, read_stage
+from scenegraph.stage_audit.checks import contact_support, heights_above_ground, overlaps, stance_runs
+from scenegraph.stage_audit.momenta import G, momenta
+from scenegraph.stage_audit.reader import StageSamples, read_stage
 
-__all__ = ["AuditSettings", "Tolerances", "audit_stage", "audit_samples", "SUMMARY_KEYS"]
+__all__ = ["AuditSettings", "Tolerances", "audit_stage", "audit_samples", "SUMMARY_KEYS", "summary_line"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,13 @@ class AuditSettings:
 
 SUMMARY_KEYS = ("penetration_max_mm", "stance_slide_max_mm", "flight_wrench_rms_bw", "cop_outside_max_cm",
                 "dense_residual_max_bw", "interpenetration_max_cm")
+
+
+def summary_line(rep: dict) -> str:
+    """One line of an audit report: verdict, frames, fps and the summary figures."""
+    s = rep["summary"]
+    return (f"audit: {rep['verdict']} frames={rep['frames']} fps={rep['fps']:g} "
+            + " ".join(f"{k}={float(s[k]):.4g}" for k in SUMMARY_KEYS))
 
 
 def _r(x, nd=4):

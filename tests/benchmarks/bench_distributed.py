@@ -62,7 +62,7 @@ def numbers(rep: dict) -> list:
 
 
 def run(name: str, work: Path, tag: str, log, **kw) -> tuple[float, dict, bytes]:
-    from schedules.cli_run import run_scenario
+    from schedules.cli.run import run_scenario
 
     out = work / f"{tag}.usda"
     t0 = time.perf_counter()
@@ -71,7 +71,7 @@ def run(name: str, work: Path, tag: str, log, **kw) -> tuple[float, dict, bytes]
 
 
 def sweep(work: Path, tag: str, log, **kw) -> tuple[float, list]:
-    from schedules.cli_sweep import run_sweep
+    from schedules.cli.sweep import run_sweep
 
     out = work / tag
     t0 = time.perf_counter()

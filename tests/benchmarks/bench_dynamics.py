@@ -81,8 +81,8 @@ def main(argv=None) -> int:
     import pinocchio as pin
 
     from pinocchio_model import build_pinocchio, random_states
-    from scenegraph import codegen
-    from scenegraph.body import make_character
+    from scenegraph.model import codegen
+    from scenegraph.model.body import make_character
 
     N, R = args.states, args.repeats
     ch = make_character(args.preset)

@@ -61,7 +61,7 @@ class Run:
 
     def __init__(self, args: list[str], cwd: Path):
         self.t0 = time.perf_counter()
-        self.proc = subprocess.Popen([sys.executable, "-m", "schedules.cli", "run", *args], cwd=cwd, env=_env(),
+        self.proc = subprocess.Popen([sys.executable, "-m", "schedules.cli.main", "run", *args], cwd=cwd, env=_env(),
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                      start_new_session=True)
         self.lines: list[tuple[float, str]] = []
@@ -167,7 +167,7 @@ def half_written(folder: Path, ref_frames: dict[Path, dict[str, int]]) -> list[s
 
     ``ref_frames``: :func:`usd_frames` of the uninterrupted run; a stage must have the frames of
     the same stage there (a stage the reference lacks must read back whole)."""
-    from schedules.checkpoints import CheckpointError, read_all
+    from schedules.execution.checkpoints import CheckpointError, read_all
     bad = []
     for p in sorted(folder.rglob("*")):
         if not p.is_file() or p.name.startswith(".") or p.suffix == ".log":
@@ -321,7 +321,7 @@ def main() -> None:
                       f"{other.text.strip().splitlines()[-1][:160] if other.text.strip() else ''}", flush=True)
             holder.kill_at(0.0)
             holder.finish()
-            probe = subprocess.run([sys.executable, "-c", "import sys; from schedules.checkpoints import RunLock; "
+            probe = subprocess.run([sys.executable, "-c", "import sys; from schedules.execution.checkpoints import RunLock; "
                                     "RunLock(sys.argv[1]).acquire(); print('taken over')", str(d / "run")],
                                    env=_env(), capture_output=True, text=True)
             print(f"stale lock after SIGKILL of the holder: {(probe.stdout + probe.stderr).strip()[-160:]}", flush=True)

@@ -38,7 +38,7 @@ KEYS = ("penetration_max_mm", "stance_slide_max_mm", "flight_wrench_rms_bw", "co
 def produce(name: str, stages: Path, jobs: int) -> tuple[Path | None, str]:
     """Write DIR/NAME.usda with compose run at 120 fps; (path or None, a note)."""
     out = stages / f"{name}.usda"
-    cmd = [sys.executable, "-m", "schedules.cli", "run", name, "-o", str(out), "--fps", "120",
+    cmd = [sys.executable, "-m", "schedules.cli.main", "run", name, "-o", str(out), "--fps", "120",
            "--report", str(stages / f"{name}.run.json"), "--run-dir", str(stages / "runs" / name),
            "--jobs", str(jobs), "--resume"]
     t0 = time.perf_counter()

@@ -3,7 +3,7 @@
     python tests/benchmarks/bench_nio.py [--frames 64:201] [--max-iter 200] [--out scenarios/styles/walk.yaml]
 
 X_T: the clip's smooth reconstruction moved onto its own footsteps
-(``schedules.cli_learn.clip_target``).  Timed: NIO only (``nio_s``; loading, reconstruction
+(``schedules.cli.learn.clip_target``).  Timed: NIO only (``nio_s``; loading, reconstruction
 and the target projection are reported separately).  Re-synthesis
 (``NIO.resynthesize``): the spacetime solve with the clip's own footsteps started at X_T
 with its contact forces, the same budget (300 IPOPT iterations) for each of the learned style, the default
@@ -30,10 +30,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from schedules.cli_learn import clip_target, parse_frames, save_learned  # noqa: E402
-from scenegraph.body import N_JOINT  # noqa: E402
+from schedules.cli.learn import clip_target, parse_frames, save_learned  # noqa: E402
+from scenegraph.model.body import N_JOINT  # noqa: E402
 from scenegraph.nio import joint_rms_deg, learn_style, resynthesize_from_example  # noqa: E402
-from scenegraph.style import default_style  # noqa: E402
+from scenegraph.model.style import default_style  # noqa: E402
 
 CLIP = ROOT / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
 

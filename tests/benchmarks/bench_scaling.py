@@ -83,7 +83,7 @@ def chain_yaml(n: int, gap: float = 0.65, duration: float = 1.2, ahead: float = 
 
 def compose_cmd() -> list[str]:
     exe = shutil.which("compose")
-    return [exe] if exe else [sys.executable, "-c", "import sys; from schedules.cli import main; sys.exit(main())"]
+    return [exe] if exe else [sys.executable, "-c", "import sys; from schedules.cli.main import main; sys.exit(main())"]
 
 
 CAPPED = ("Maximum_Iterations_Exceeded", "Stalled")
@@ -136,8 +136,8 @@ def main(argv=None) -> None:
     tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_scaling."))
     tmp.mkdir(parents=True, exist_ok=True)
     from scenarios.bundled import bundled_scenarios
-    from scenegraph.body import make_character
-    from scenegraph.residual import compiled_kernel
+    from scenegraph.model.body import make_character
+    from scenegraph.model.residual import compiled_kernel
     compiled_kernel(make_character())  # fill the compiled-code cache before timing anything
     runs = [run("walk", "walk", tmp)]
     walks = []

@@ -1,5 +1,5 @@
 """Benchmark (issue #7): the bundled ``tackle`` and ``handhold`` runs, and ``handhold`` solved
-as ONE simultaneous NLP over both characters with the hard hand-hold (scenegraph/joint.py).
+as ONE simultaneous NLP over both characters with the hard hand-hold (scenegraph/problem/joint.py).
 
     python tests/benchmarks/bench_scenarios.py [--skip-tackle] [--skip-handhold] [--skip-monolithic]
                                                [--mono-max-iter N]
@@ -36,7 +36,7 @@ import numpy as np
 def run_bundled(name: str, tmp: Path) -> tuple[float, dict | None]:
     """(wall seconds, report); report None when the run failed (a step did not converge)."""
     from scenarios.errors import ComposeError
-    from schedules.cli_run import run_scenario
+    from schedules.cli.run import run_scenario
 
     t = time.perf_counter()
     try:
@@ -60,15 +60,15 @@ def scenario_line(name: str, seconds: float, rep: dict) -> str:
 def monolithic(max_iter: int) -> dict:
     """Solve handhold as one NLP; returns timings, status and the checks."""
     from scenarios.loader import load_scenario
-    from scenegraph.audit import audit_motion
-    from scenegraph.joint import JointCoupling, coupling_times, solve_joint
-    from scenegraph.scene import build_scene
-    from scenegraph.residual import compiled_kernel
-    from schedules.cli_run import AUDIT_TOLERANCES, goal_report
-    from schedules.compiler import compile_schedule
-    from schedules.executor import _subproblem, presolve_character
-    from schedules.step import FULL
-    from scenegraph.motion import Motion
+    from scenegraph.model.audit import audit_motion
+    from scenegraph.problem.joint import JointCoupling, coupling_times, solve_joint
+    from scenegraph.world.scene import build_scene
+    from scenegraph.model.residual import compiled_kernel
+    from schedules.cli.run import AUDIT_TOLERANCES, goal_report
+    from schedules.plan.compiler import compile_schedule
+    from schedules.execution.executor import _subproblem, presolve_character
+    from schedules.plan.step import FULL
+    from scenegraph.model.motion import Motion
 
     scn = load_scenario("handhold")
     scene = build_scene(scn)
@@ -102,7 +102,7 @@ def monolithic(max_iter: int) -> dict:
     goals, couplings = goal_report(final, audits)
     gap = couplings[cpl.name]["measured"]
     t_dense = np.linspace(cpl.interval[0], cpl.interval[1], int(round((cpl.interval[1] - cpl.interval[0]) * 120)) + 1)
-    from scenegraph.scene import handle_track
+    from scenegraph.world.scene import handle_track
     dense_gap = float(np.linalg.norm(handle_track(final.character(a), ha, t_dense)
                                      - handle_track(final.character(b), hb, t_dense), axis=1).max())
     ok = (jr.success and couplings[cpl.name]["holds"] and all(v["passes"] for v in audits.values())

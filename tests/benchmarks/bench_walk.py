@@ -11,11 +11,11 @@ from __future__ import annotations
 import argparse
 import time
 
-from scenegraph.body import make_character
-from scenegraph.footsteps import footsteps_for_walk
-from scenegraph.residual import compiled_kernel, kernel_hessian
-from scenegraph.style import default_style
-from scenegraph.synthesis import synthesize
+from scenegraph.model.body import make_character
+from scenegraph.model.footsteps import footsteps_for_walk
+from scenegraph.model.residual import compiled_kernel, kernel_hessian
+from scenegraph.model.style import default_style
+from scenegraph.problem.synthesis import synthesize
 
 
 def main() -> None:

@@ -87,8 +87,8 @@ def run_case(kind: str, data: bytes, params: dict, in_dir: Path, work_dir: Path)
                 raise ComposeError("an error without a place")
         elif kind == "scenario":
             from scenarios.loader import load_scenario
-            from scenegraph.scene import build_scene
-            from schedules.cli_scenario import check_scenario
+            from scenegraph.world.scene import build_scene
+            from schedules.cli.scenario import check_scenario
 
             scn = load_scenario(str(path))
             check_scenario(scn)
@@ -97,8 +97,8 @@ def run_case(kind: str, data: bytes, params: dict, in_dir: Path, work_dir: Path)
                 if not (np.all(np.isfinite(c.motion.ctrl)) and np.all(np.isfinite(c.motion.warp))):
                     raise FloatingPointError(f"the initial motion of {c.name} is not finite")
         else:
-            from scenegraph.body import PRESETS as BODY_PRESETS, make_character
-            from scenegraph.mocap import read_clip
+            from scenegraph.model.body import PRESETS as BODY_PRESETS, make_character
+            from scenegraph.mocap.clip import read_clip
 
             preset = params.get("preset", "adult_male")
             clip = read_clip(str(path), frames=params.get("frames"), preset=preset)
@@ -135,9 +135,9 @@ def _worker_main(conn, root: str) -> None:
     work_dir.mkdir(exist_ok=True)
     os.chdir(work_dir)
     import scenarios.loader  # noqa: F401  (warm imports before the first timed case)
-    import scenegraph.mocap  # noqa: F401
-    import scenegraph.scene  # noqa: F401
-    import schedules.cli_scenario  # noqa: F401
+    import scenegraph.mocap.clip  # noqa: F401
+    import scenegraph.world.scene  # noqa: F401
+    import schedules.cli.scenario  # noqa: F401
     conn.send("ready")
     while True:
         msg = conn.recv()

@@ -1,0 +1,1 @@
+"""Output: the USD stage, BVH export and preview pictures."""

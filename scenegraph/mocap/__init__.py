@@ -1,0 +1,1 @@
+"""Motion capture in: BVH parsing, retargeting onto the character, clips and footstep contacts."""

@@ -1,0 +1,229 @@
+"""Footsteps: where and when a foot is planted (thesis Eq. 6.2), and the one generator of
+footstep plans (walks, runs, gait changes, standing), with one foot width FOOT_WIDTH.
+
+A footstep plants one foot over a world-time interval.  During the first part of the
+stance the heel touches the ground, later the ball; fractions of the stance say when.
+The planted point is ``position`` (x, y of the ball handle, m) with the foot's ``heading``
+(rad, yaw of the foot's long axis); the heel lies behind the ball along that heading.
+``free`` lets the solver move the position.
+"""
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from scenegraph.model.body import Character
+
+__all__ = ["Footstep", "contact_points", "WALK_HEEL", "WALK_BALL", "RUN_BALL", "footsteps_for_walk", "Gait",
+           "GAITS", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH", "foot_length", "gait_footsteps",
+           "walk_footsteps", "standing_footsteps"]
+
+WALK_HEEL = (0.0, 0.6)   # heel on the ground during this part of the stance
+WALK_BALL = (0.15, 1.0)  # ball on the ground during this part
+RUN_BALL = (0.0, 1.0)
+CADENCE = 1.85          # steps per second of generated walks
+STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
+FOOT_WIDTH = 0.18       # m, lateral distance between the feet of every generated footstep plan
+
+
+@dataclass(frozen=True)
+class Footstep:
+    foot: str  # "l" or "r"
+    position: tuple[float, float]  # world x, y of the ball handle (m)
+    t0: float  # start of stance (s, world time of the initial motion)
+    t1: float  # end of stance (s)
+    heading: float = 0.0  # rad
+    heel: tuple[float, float] | None = WALK_HEEL
+    ball: tuple[float, float] | None = WALK_BALL
+    free: bool = False
+
+    def __post_init__(self):
+        if self.foot not in ("l", "r"):
+            raise ValueError(f"foot must be 'l' or 'r', not {self.foot!r}")
+        if not self.t1 > self.t0:
+            raise ValueError(f"footstep interval must be positive, got [{self.t0}, {self.t1}]")
+
+
+def contact_points(ch: Character, step: Footstep, position=None,
+                   ground=None) -> list[tuple[str, tuple[float, float], object]]:
+    """[(handle, (t_from, t_to), target xy)] for the handles this footstep plants.
+
+    ``position`` overrides the ball position (a numpy pair or a CasADi 2-vector).  On an
+    inclined ``ground`` (:class:`~scenegraph.model.ground.Ground`) the heel lies a foot length
+    behind the ball *along the ground*, so its horizontal offset shrinks by the slope's
+    cosine along the foot (the slope is taken at the footstep's nominal position).
+    """
+    pos = step.position if position is None else position
+    heel_h, ball_h = ch.handle(f"heel_{step.foot}"), ch.handle(f"ball_{step.foot}")
+    foot_len = ball_h.point[0] - heel_h.point[0]
+    d = np.array([np.cos(step.heading), np.sin(step.heading)])
+    if ground is not None and not ground.flat:
+        rise = float(ground.gradient(*step.position) @ d)  # dz per m along the foot
+        foot_len = foot_len / np.sqrt(1.0 + rise * rise)
+    out = []
+    span = step.t1 - step.t0
+    if step.ball is not None:
+        out.append((ball_h.name, (step.t0 + step.ball[0] * span, step.t0 + step.ball[1] * span), pos))
+    if step.heel is not None:
+        heel_xy = (pos[0] - foot_len * d[0], pos[1] - foot_len * d[1])
+        out.append((heel_h.name, (step.t0 + step.heel[0] * span, step.t0 + step.heel[1] * span), heel_xy))
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def foot_length(ch: Character) -> float:
+    """Heel-to-ball distance (m) of the character's foot (the ball handle's x minus the heel's)."""
+    return float(ch.handle("ball_l").point[0] - ch.handle("heel_l").point[0])
+
+
+def _part(frac, a, b, c, d):
+    """Fractions of the clipped stance [c, d] during which the part (fractions of [a, b]) is down."""
+    if frac is None:
+        return None
+    lo, hi = max(a + frac[0] * (b - a), c), min(a + frac[1] * (b - a), d)
+    if hi - lo < 0.02:
+        return None
+    return (float((lo - c) / (d - c)), float((hi - c) / (d - c)))
+
+
+@dataclass(frozen=True)
+class Gait:
+    """Timing and size of generated steps: steps per second, stance / stride, step length (m)."""
+
+    cadence: float
+    stance_fraction: float
+    step_length: float
+    heel: tuple[float, float] | None
+    ball: tuple[float, float] | None
+
+
+GAITS = {"walk": Gait(CADENCE, STANCE_FRACTION, 0.7, WALK_HEEL, WALK_BALL),
+         "run": Gait(2.8, 0.38, 1.1, None, RUN_BALL)}
+
+
+def gait_footsteps(start_xy, target_xy, t0: float, t1: float, change: tuple[float, float, str] | None = None,
+                   *, width: float = FOOT_WIDTH, foot_length: float = 0.2, first: str = "r",
+                   before: str = "walk") -> tuple[Footstep, ...]:
+    """Free footsteps along start → target over [t0, t1] (world m, s) through a gait change.
+
+    ``change`` = (time, blend, gait after) (s, s, name in GAITS): cadence, stance fraction and
+    step length move from ``before``'s to the new gait's over [time − blend/2, time + blend/2]
+    (smoothstep).  Stance k is centred where the step phase ∫ cadence dt reaches k; the
+    pelvis advances in proportion to ∫ cadence · step length dt, scaled to reach the target
+    at t1; each foot lands under it (± width/2).  A stance is a walk's (heel, then ball) or
+    a run's (ball only, flight between stances) by which gait dominates at its middle.
+    Without ``change`` the whole path uses ``before`` and every footstep is free; with it only
+    the stances centred inside the blend are.
+    """
+    tc, blend, after = change or (t0, 0.0, before)
+    g0, g1 = GAITS[before], GAITS[after]
+    tt = np.linspace(t0, t1, 2001)
+    w = np.clip((tt - (tc - blend / 2)) / max(blend, 1e-6), 0.0, 1.0)
+    w = w * w * (3 - 2 * w)
+    cad = g0.cadence + (g1.cadence - g0.cadence) * w
+    sf = g0.stance_fraction + (g1.stance_fraction - g0.stance_fraction) * w
+    speed = cad * (g0.step_length + (g1.step_length - g0.step_length) * w)
+    dt = np.diff(tt)
+    phase = np.r_[0.0, np.cumsum((cad[1:] + cad[:-1]) / 2 * dt)]
+    dist_t = np.r_[0.0, np.cumsum((speed[1:] + speed[:-1]) / 2 * dt)]
+    p0, p1 = np.asarray(start_xy, float), np.asarray(target_xy, float)
+    d = p1 - p0
+    u = d / max(float(np.linalg.norm(d)), 1e-9)
+    lat = np.array([-u[1], u[0]])
+    heading = math.atan2(u[1], u[0])
+    steps = []
+    for k in range(int(math.floor(phase[-1])) + 1):
+        tm = float(np.interp(k, phase, tt))
+        i = int(np.searchsorted(tt, tm).clip(0, len(tt) - 1))
+        stance = 2 * sf[i] / cad[i]
+        a, b = tm - stance / 2, tm + stance / 2
+        c, e = max(a, t0), min(b, t1)
+        this = first if k % 2 == 0 else ("l" if first == "r" else "r")
+        pel = p0 + d * dist_t[i] / dist_t[-1]
+        side = 1.0 if this == "l" else -1.0
+        ball = pel + side * width / 2 * lat + u * foot_length / 2
+        gg = g1 if w[i] >= 0.5 else g0
+        heel, ballf = _part(gg.heel, a, b, c, e), _part(gg.ball, a, b, c, e)
+        if e - c < 0.04 or (heel is None and ballf is None):
+            continue
+        # with a change, the footprints of the transition are placed by the solver; the
+        # walk's before it and the run's after it keep their gaits' spacing and timing
+        free = change is None or abs(tm - tc) <= blend / 2
+        steps.append(Footstep(this, (float(ball[0]), float(ball[1])), float(c), float(e), heading,
+                              heel=heel, ball=ballf, free=free))
+    return tuple(steps)
+
+
+def walk_footsteps(start_xy, target_xy, t0: float, t1: float, *, cadence: float = CADENCE,
+                   stance_fraction: float = STANCE_FRACTION, width: float = FOOT_WIDTH, foot_length: float = 0.2,
+                   free: bool = True, first: str = "r") -> tuple[Footstep, ...]:
+    """Free footsteps along the straight line start → target over [t0, t1] (world m, s).
+
+    The pelvis is assumed to move uniformly; each foot lands under it (± width/2) at the
+    middle of its stance.  Stances that begin before t0 or end after t1 are clipped, and
+    their heel/ball parts clipped with them.
+    """
+    p0, p1 = np.asarray(start_xy, float), np.asarray(target_xy, float)
+    T = t1 - t0
+    d = p1 - p0
+    dist = float(np.linalg.norm(d))
+    u = d / dist if dist > 1e-6 else np.array([1.0, 0.0])
+    lat = np.array([-u[1], u[0]])
+    heading = math.atan2(u[1], u[0])
+    n = max(2, int(round(T * cadence)))
+    period = T / n
+    stance = 2 * period * stance_fraction
+    steps = []
+    for k in range(n + 1):  # stance k is centred at t0 + k * period; feet alternate
+        this = first if k % 2 == 0 else ("l" if first == "r" else "r")
+        tm = t0 + k * period
+        a, b = tm - stance / 2, tm + stance / 2
+        c, e = max(a, t0), min(b, t1)
+        pel = p0 + d * (tm - t0) / T
+        side = 1.0 if this == "l" else -1.0
+        ball = pel + side * width / 2 * lat + u * foot_length / 2
+        heel = _part(WALK_HEEL, a, b, c, e)
+        ballf = _part(WALK_BALL, a, b, c, e)
+        if e - c < 0.04 or (heel is None and ballf is None):
+            continue
+        steps.append(Footstep(this, (float(ball[0]), float(ball[1])), float(c), float(e), heading,
+                              heel=heel, ball=ballf, free=free))
+    return tuple(steps)
+
+
+def standing_footsteps(start, t0: float, t1: float, foot_length: float, width: float = FOOT_WIDTH):
+    x, y, h = start
+    u, lat = np.array([math.cos(h), math.sin(h)]), np.array([-math.sin(h), math.cos(h)])
+    out = []
+    for foot, side in (("l", 1.0), ("r", -1.0)):
+        ball = np.array([x, y]) + side * width / 2 * lat + u * foot_length / 2
+        out.append(Footstep(foot, (float(ball[0]), float(ball[1])), t0, t1, h, heel=(0.0, 1.0), ball=(0.0, 1.0)))
+    return tuple(out)
+
+
+
+
+def footsteps_for_walk(n_steps: int = 4, step_length: float = 0.7, cadence: float = CADENCE,
+                       stance_fraction: float = STANCE_FRACTION, width: float = FOOT_WIDTH, start: float = 0.0,
+                       first: str = "r", gait: str = "walk") -> tuple[Footstep, ...]:
+    """A straight walk (or run) along +X: ``n_steps`` alternating fixed footsteps (m, s), the
+    first ball at x = 0.1 m.
+
+    ``cadence`` is steps per second; one step later the other foot lands.  A stance lasts
+    ``stance_fraction`` of a stride (two steps): > 0.5 gives double support (walk), < 0.5
+    flight phases (run).
+    """
+    period = 1.0 / cadence
+    stance = 2 * period * stance_fraction
+    heel, ball = (WALK_HEEL, WALK_BALL) if gait == "walk" else (None, RUN_BALL)
+    steps = []
+    foot = first
+    for i in range(n_steps):
+        t0 = start + i * period
+        y = width / 2 if foot == "l" else -width / 2
+        steps.append(Footstep(foot, (0.1 + i * step_length, y), t0, t0 + stance, heel=heel, ball=ball))
+        foot = "l" if foot == "r" else "r"
+    return tuple(steps)

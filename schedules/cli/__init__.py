@@ -1,0 +1,1 @@
+"""The ``compose`` command line; nothing imports these modules."""

@@ -1,0 +1,201 @@
+"""Lowering: a Step over a Scene → the subproblems that solve it (one per character, or one
+joint NLP for a hard coupling).  The only reader of a Step's free blocks and terms.
+
+The contract (schedules/plan/step.py lists the vocabulary; tests/test_contract.py checks both
+sides): every free block and term the compiler writes is consumed here exactly as written,
+and :func:`check_step` rejects a Step with anything this module does not handle.
+
+* ``q``: the control points under the window (all of them for a whole-scene Step);
+* ``timewarp``: the warp (the compiler frees it only over the whole scene);
+* ``duration``: the end of the warp moves within ``Scene.duration_bounds`` (world s);
+* ``footprints``: free footsteps inside the window move; the others are held;
+* ``lambda``: contact coefficients (the transcription always frees them where a foot is planted);
+* ``coupling_forces``: the hand force of a hard coupling (a joint solve, :mod:`scenegraph.problem.joint`);
+* ``energy`` (1), ``dynamics`` (hard → full dynamics, relaxed → root residual relaxed),
+  ``environment`` (ground, friction pyramid with the scenario's μ, no penetration, feet not
+  crossing: always part of the transcription), ``start`` (a pelvis spring of exactly this
+  weight at the start), ``boundary:start=hard`` / ``boundary:end=hard`` (held control points
+  outside the window), ``boundary:end=free`` (a receding window: open end),
+  ``goal:<name>`` (springs of exactly this weight, or hard targets), ``coupling:<name>``
+  (a rubber band of this stiffness in N/m, or ``hard``: a joint solve).
+
+Times: a Step's window is in canonical seconds; the Subproblem's in world seconds of the
+character's current motion.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from scenarios.errors import ComposeError
+from scenegraph.problem.joint import JointCoupling, coupling_times
+from scenegraph.model.motion import Motion
+from scenegraph.problem import HandleTarget, Subproblem, window_mask
+from scenegraph.world.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
+from scenegraph.model.style import Style
+
+from schedules.plan.step import FREE, FULL, HARD, RELAXED, ROLES, STEP_KINDS, Step, vocabulary
+
+__all__ = ["lower", "lower_joint", "check_step", "HANDLED", "Lowered", "STALL_ITERATIONS", "SOFT_PIN_HZ",
+           "COUPLING_TARGET_HZ", "JOINT_COUPLING_HZ", "iteration_cap", "COUPLED_FULL_MAX_ITER"]
+
+STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
+SOFT_PIN_HZ = 120.0  # soft footprint springs of full steps: planted feet still between collocation points
+COUPLING_TARGET_HZ = 60.0  # rubber-band target points per second (at 10 Hz the hands met at the
+# target points and parted by up to 9 cm between them)
+JOINT_COUPLING_HZ = 30.0  # hard hand-hold: coupling times (and force variables) per second
+COUPLED_FULL_MAX_ITER = 100  # a coupled character's full step: one move of the alternation (thesis §6.4.3)
+
+# What this module consumes (tests/test_contract.py: must cover step.declared_vocabulary())
+HANDLED = ({("kind", k) for k in (FULL, "timing")} | {("role", r) for r in ROLES}
+           | {("free", b) for b in ("q", "timewarp", "duration", "footprints", "lambda", "coupling_forces")}
+           | {("term", t) for t in ("energy=number", "dynamics=hard", "dynamics=relaxed", "environment=hard",
+                                    "start=number", "boundary:start=hard", "boundary:end=hard",
+                                    "boundary:end=free", "goal=number", "goal=hard", "coupling=number",
+                                    "coupling=hard")})
+
+
+def check_step(step: Step) -> None:
+    """ComposeError naming the Step and the item when it holds anything the lowering does not
+    consume (a compiler/executor mismatch, never a user error)."""
+    unknown = sorted(vocabulary(step) - HANDLED)
+    if unknown:
+        raise ComposeError(f"step {step.id!r}: the executor does not handle {', '.join(f'{a} {b}' for a, b in unknown)}"
+                           " (schedules/execution/lower.py)")
+    if step.term("energy") != 1.0:
+        raise ComposeError(f"step {step.id!r}: energy weight {step.term('energy')!r}; the transcription "
+                           "weighs the energy 1")
+    if step.kind not in STEP_KINDS or step.term("dynamics") != (HARD if step.kind == FULL else RELAXED):
+        raise ComposeError(f"step {step.id!r}: a {step.kind} step with dynamics={step.term('dynamics')!r}")
+    if "duration" in step.free and "timewarp" not in step.free:
+        raise ComposeError(f"step {step.id!r}: a free duration needs a free timewarp")
+
+
+def _blend(a: Style, b: Style, w: float) -> Style:
+    if w <= 0.0 or a is b:
+        return a
+    if w >= 1.0:
+        return b
+    return Style.from_vector((1 - w) * a.vector() + w * b.vector(), name=f"{a.name}>{b.name}@{w:.2f}")
+
+
+def style_at(scene: Scene, who: str, step: Step, t: float) -> Style:
+    """θ of ``who`` at canonical time ``t`` (s) from the Step's style timeline."""
+    st = scene.character(who)
+    tl = next((s for s in step.styles if s.character == who), None)
+    if tl is None:
+        return st.style
+    s0, s1, w = tl.at(t)
+    return _blend(st.style_of(s0), st.style_of(s1), w)
+
+
+def world_window(motion: Motion, duration: float, window: tuple[float, float]) -> tuple[float, float]:
+    """Canonical seconds (world time of the initial uniform warp) → world time of ``motion``."""
+    s = np.clip(np.array(window, float) / duration, 0.0, 1.0)
+    t = motion.time(s)
+    return float(t[0]), float(t[1])
+
+
+def iteration_cap(step: Step) -> int:
+    """IPOPT iterations of a Step's subproblems: 100 (timing; a coupled full step), 300 (full)."""
+    from schedules.plan.step import COUPLED
+    if step.kind != FULL:
+        return 100
+    return COUPLED_FULL_MAX_ITER if COUPLED in step.schedules else 300
+
+
+def _goal_weights(step: Step) -> dict[str, float | str]:
+    return {n.split(":", 1)[1]: w for n, w in step.terms if n.startswith("goal:")}
+
+
+def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tuple[Subproblem, np.ndarray | None]:
+    """The Subproblem of ``who`` in ``step`` and the mask of the control points it writes back
+    (None: all).  Hard couplings are not included here (:func:`lower_joint`)."""
+    check_step(step)
+    st = scene.character(who)
+    m = st.motion
+    whole = step.window[0] <= 1e-9 and step.window[1] >= scene.duration - 1e-9
+    win = world_window(m, scene.duration, step.window)
+    free = set()
+    if "q" in step.free:
+        free.add("q")
+    if "timewarp" in step.free:
+        if not whole:
+            raise ComposeError(f"step {step.id!r}: a free timewarp in a windowed step (the compiler frees it "
+                               "over the whole scene only)")
+        free.add("warp")
+    fix_end, end_bounds = True, None
+    if "duration" in step.free:
+        if scene.duration_bounds is None:
+            raise ComposeError(f"step {step.id!r}: a free duration, but the Scene has no duration_bounds")
+        fix_end, end_bounds = False, tuple(float(b) for b in scene.duration_bounds)
+    steps = st.footsteps
+    if "footprints" in step.free:
+        free.add("footprints")
+        # only footsteps entirely inside the window move; the rest are held where they are
+        steps = tuple(f if (whole or (f.t0 >= win[0] - 1e-6 and f.t1 <= win[1] + 1e-6)) else replace(f, free=False)
+                      for f in steps)
+    targets, avoid = goal_targets(scene, who, _goal_weights(step), window=win)  # window: reaction time
+    springs = ()
+    for cname in step.couplings:
+        w = step.term(f"coupling:{cname}")
+        if w == HARD:
+            continue  # lower_joint
+        targets += coupling_targets(scene, who, cname, float(w), win, rate=COUPLING_TARGET_HZ)
+        springs += coupling_springs(scene, who, cname, float(w), win)
+    w_start = step.term("start")
+    if w_start is not None and win[0] <= m.start + 1e-9:
+        x, y, _ = st.start
+        z = float(handle_track(st, "pelvis", [m.start])[0][2])
+        targets += (HandleTarget("pelvis", m.start, (x, y, z), float(w_start), name="start"),)
+    style = style_at(scene, who, step, step.window[0])
+    style_end = style_at(scene, who, step, step.window[1])
+    if style_end is style:
+        style_end = None
+    sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
+                    dynamics="full" if step.term("dynamics") == HARD else "relaxed", targets=targets, avoid=avoid,
+                    springs=springs, style_end=style_end,
+                    max_iter=iteration_cap(step) if max_iter is None else max_iter,
+                    open_end=not whole and step.term("boundary:end") == FREE,
+                    window_only=step.role == "receding", fix_end_time=fix_end, end_time_bounds=end_bounds,
+                    label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS,
+                    soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
+                    # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
+                    # a dense grid too, as synthesize does for runs — between the 30 Hz points a
+                    # toe dipped 11–15 mm (audit gate 10 mm)
+                    soft_ground_hz=SOFT_PIN_HZ if step.kind == FULL and step.role == "horizon" else 0.0)
+    mask = None if whole else window_mask(sp, m.n_ctrl)
+    return sp, mask
+
+
+@dataclass(frozen=True)
+class Lowered:
+    """A joint Step: the two characters (a, b) and the hard hand-hold between them."""
+
+    characters: tuple[str, str]
+    coupling: JointCoupling
+
+
+def lower_joint(scene: Scene, step: Step) -> Lowered | None:
+    """The joint problem of a Step with a hard coupling (``coupling:<name>=hard``), or None.
+
+    The compiler emits hard couplings only for hand-holds between the two characters of a
+    full step (it rejects the rest with a located error); both timewarps are held there.
+    The coupling times are the coupling interval ∩ the window at JOINT_COUPLING_HZ (world s of
+    the first character; both motions share world time)."""
+    hard = [c for c in step.couplings if step.term(f"coupling:{c}") == HARD]
+    if not hard:
+        return None
+    if "coupling_forces" not in step.free or step.kind != FULL or len(step.characters) != 2 or len(hard) != 1:
+        raise ComposeError(f"step {step.id!r}: a hard coupling needs a full step of two characters with one "
+                           "coupling and free coupling_forces")
+    c = scene.coupling(hard[0])
+    if c.type != "hand_hold":
+        raise ComposeError(f"step {step.id!r}: hard coupling {c.name!r} is a {c.type}; only a hand_hold has a joint solve")
+    a, b = step.characters
+    ha = next(h for w, h in c.handles if w == a)
+    hb = next(h for w, h in c.handles if w == b)
+    win = world_window(scene.character(a).motion, scene.duration, step.window)
+    lo, hi = max(c.interval[0], win[0]), min(c.interval[1], win[1])
+    return Lowered((a, b), JointCoupling(ha, hb, coupling_times((lo, hi), JOINT_COUPLING_HZ), name=c.name))
