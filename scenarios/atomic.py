@@ -2,7 +2,7 @@
 
 Every file compose writes (run-folder checkpoints and manifest, report, USD stages, BVH,
 preview images and movies, style YAML, compiled kernels) goes through :func:`atomic_path`
-or :func:`atomic_write`.  The contract (``tests/test_atomic.py``):
+or :func:`atomic_write`.  The contract (``tests/system/test_atomic.py``):
 
 * the new content is written to a temporary file ``.<name>.<random><suffix>`` in the
   destination's folder, fsync'ed, given its mode, renamed over the destination (``os.replace``,

@@ -520,7 +520,7 @@ def default_character() -> Character:
 
 
 # The DOF order make_character builds (root, trunk, left arm, left leg, right arm, right leg);
-# tests/test_body.py checks it against default_character().
+# tests/model/test_body.py checks it against default_character().
 _SIDE_DOFS = ("shoulder_flex", "shoulder_twist", "shoulder_abd", "elbow_flex", "wrist_flex",
               "hip_flex", "hip_abd", "hip_rot", "knee_flex", "ankle_flex", "ankle_inv", "toe_flex")
 DOF_NAMES: tuple[str, ...] = (("root_tx", "root_ty", "root_tz", "root_yaw", "root_pitch", "root_roll",

@@ -240,7 +240,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     ``derivatives=False`` skips the Lagrangian Hessian and the constraint Jacobian (``hess_lag``
     and ``jac_g`` are then None; about 70 % of the build time): the variables, objective,
     constraints, bounds and layout are the same, which is what a smoke test of the lowering
-    needs (tests/test_bundled_build.py); such an NLP cannot be handed to IPOPT."""
+    needs (tests/execution/test_bundled_build.py); such an NLP cannot be handed to IPOPT."""
     ch, m = sp.character, sp.motion
     K, nW = m.n_ctrl, len(m.warp)
     mg = ch.total_mass * G

@@ -2,7 +2,7 @@
 
 It reads only the stage — joint transforms and skinned meshes through UsdSkel, mass from
 ``UsdPhysics.MassAPI`` or the meshes' volumes — never compose's dynamics, transcription or
-residual kernels (tests/test_architecture.py enforces it): it is the check of them.
+residual kernels (tests/system/test_architecture.py enforces it): it is the check of them.
 See docs/audit.md for what is measured and the tolerances.
 """
 from scenegraph.stage_audit.reader import DEFAULT_DENSITY, read_stage

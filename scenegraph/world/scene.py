@@ -23,12 +23,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from scenarios.errors import InputError
-from scenarios.schema import (AvoidGoal, FootprintsGoal, Scenario, StyleChangeGoal, TackleGoal, WalkToGoal,
-                              joint_dofs)
+from scenarios.schema import Scenario, WalkToGoal, joint_dofs
 
 from scenegraph.model.body import PRESETS, Character, make_character
 from scenegraph.model.footsteps import GAITS, Footstep, foot_length, gait_footsteps, standing_footsteps, walk_footsteps
 from scenegraph.model.gait import initial_motion, style_gait
+from scenegraph.world.footplan import RANK_FOOTPRINTS, RANK_CHASE, FootContext, plan_footsteps
 from scenegraph.model.ground import FLAT, Ground, ground_from_environment
 from scenegraph.model.motion import Motion
 from scenegraph.world.goals import Coupling, GoalRecord, coupling_records, goal_records
@@ -193,16 +193,6 @@ def _example(scn: Scenario, spec, styles: list[tuple[str, Style]]):
 _foot_length = foot_length  # the name tests used
 
 
-def _explicit_footsteps(g: FootprintsGoal, default_heading: float, foot_length: float) -> list[Footstep]:
-    out = []
-    for fp in g.steps:
-        h = math.radians(fp.heading) if fp.heading is not None else default_heading
-        # the file gives the midpoint of heel and ball; Footstep.position is the ball
-        ball = (fp.position[0] + foot_length / 2 * math.cos(h), fp.position[1] + foot_length / 2 * math.sin(h))
-        out.append(Footstep(fp.foot, (float(ball[0]), float(ball[1])), float(fp.time[0]), float(fp.time[1]), h))
-    return out
-
-
 def _check_walk_heading(scn: Scenario, who: str, explicit_steps: bool, T: float) -> None:
     """A walk_to ``heading`` turns the feet the character stands on after arriving; it needs
     generated footsteps and time left after the arrival, and only the character's last
@@ -250,15 +240,15 @@ def build_scene(scn: Scenario) -> Scene:
     couplings = list(coupling_records(scn))
 
     ground = ground_from_environment(scn.environment, friction=scn.environment.ground.friction)
-    attackers = {g.attacker for g in scn.goals if isinstance(g, TackleGoal)}
-    order = sorted(scn.characters, key=lambda c: c.name in attackers)
+    starts = {c.name: (float(c.start.position[0]), float(c.start.position[1])) for c in scn.characters}
+    # a character whose footsteps are planned from another's motion (a tackler) is built after it
+    waits = {c.name for c in scn.characters if any(g.step_rank(c.name) == RANK_CHASE for g in goals)}
+    order = sorted(scn.characters, key=lambda c: c.name in waits)
     for spec in order:
         ch = _character(spec)
-        for cpl in couplings:  # a carried object's weight is shared by its holders (static share)
-            if cpl.type == "carry":
-                for who, handle in cpl.handles:
-                    if who == spec.name:
-                        ch = ch.with_extra_mass(handle, cpl.mass / len(cpl.handles))
+        for cpl in couplings:
+            for handle, kg in cpl.loads(spec.name):
+                ch = ch.with_extra_mass(handle, kg)
         styles = []
         for _, ref, _ in scn.style_timeline(spec.name):
             if ref not in dict(styles):
@@ -266,75 +256,17 @@ def build_scene(scn: Scenario) -> Scene:
                 styles.append((ref, st))
                 refs[ref] = where
         start = (float(spec.start.position[0]), float(spec.start.position[1]), math.radians(spec.start.heading))
-        fl = foot_length(ch)
-        steps: list[Footstep] = []
-        for _, g in scn.named_goals():
-            if isinstance(g, FootprintsGoal) and g.character == spec.name:
-                steps += _explicit_footsteps(g, start[2], fl)
-        walk = [g for g in scn.goals if isinstance(g, WalkToGoal) and g.character == spec.name]
-        gaits = [g for g in scn.goals if isinstance(g, StyleChangeGoal) and g.character == spec.name and g.gait]
-        change = None
-        if gaits:  # the (first) gait change shapes the generated footsteps; blend default 0.6 s
-            c = min(gaits, key=lambda g: g.time)
-            change = (float(c.time), float(c.blend or 0.6), c.gait)
-        before = style_gait(styles[0][1])  # the initial style's gait: a run style runs to its target
-        _check_walk_heading(scn, spec.name, bool(steps), T)
-        if walk and not steps:
-            p, t = start[:2], 0.0
-            for g in sorted(walk, key=lambda g: g.time):
-                pts = list(g.waypoints) + [g.target]
-                legs = [(np.asarray(a, float), np.asarray(b, float)) for a, b in zip([p] + pts[:-1], pts)]
-                lens = np.array([np.linalg.norm(b - a) for a, b in legs])
-                total = max(float(lens.sum()), 1e-9)
-                for (a, b), ln in zip(legs, lens):
-                    dt = (g.time - t) * ln / total if total > 1e-6 else (g.time - t) / len(legs)
-                    if dt <= 1e-6:
-                        continue
-                    first = "r" if not steps else ("l" if steps[-1].foot == "r" else "r")
-                    if change is not None and t - 1e-6 <= change[0] <= t + dt + 1e-6:
-                        steps += list(gait_footsteps(a, b, t, t + dt, change, foot_length=fl, first=first,
-                                                     before=before))
-                    elif before == "run":
-                        steps += list(gait_footsteps(a, b, t, t + dt, foot_length=fl, first=first, before="run"))
-                    else:
-                        steps += list(walk_footsteps(a, b, t, t + dt, foot_length=fl, first=first))
-                    t += dt
-                p = g.target
-            if t < T - 1e-6:  # stand at the target for the rest of the scenario, facing the last
-                last = max(walk, key=lambda g: g.time)  # walk_to's heading if it has one
-                h = math.atan2(*(np.asarray(p) - np.asarray(start[:2]))[::-1]) if last.heading is None \
-                    else math.radians(last.heading)
-                steps += list(standing_footsteps((p[0], p[1], h), t, T, fl))
-        tackles = [g for g in scn.goals if isinstance(g, TackleGoal) and g.attacker == spec.name]
-        runner = False
-        if tackles and not steps:  # run at where the target is at impact (its initial plan), then stand
-            g = min(tackles, key=lambda g: g.time)
-            other = next((c for c in chars if c.name == g.target), None)
-            if other is not None:
-                aim = handle_track(other, "chest", [g.time])[0][:2]
-            else:
-                aim = np.asarray(scn.character(g.target).start.position, float)
-            d = aim - np.asarray(start[:2])
-            stop = aim - d / max(np.linalg.norm(d), 1e-6) * 0.35
-            # one run at constant speed through the impact point; a tackle before the end of
-            # the scenario keeps running on past it (a missed tackle does not stop dead)
-            end = np.asarray(start[:2]) + (stop - np.asarray(start[:2])) * T / max(g.time, 1e-6)
-            steps += list(gait_footsteps(start[:2], end, 0.0, T, foot_length=fl, before="run"))
-            runner = True
-        dodges = [g for g in scn.goals if (isinstance(g, AvoidGoal) and g.character == spec.name)
-                  or (isinstance(g, TackleGoal) and g.target == spec.name)]
-        if dodges and not steps:  # a target without a walk of its own: walks straight ahead (its initial plan)
-            u = np.array([math.cos(start[2]), math.sin(start[2])])
-            end = np.asarray(start[:2]) + u * GAITS["walk"].cadence * GAITS["walk"].step_length * T
-            steps += list(walk_footsteps(start[:2], end, 0.0, T, foot_length=fl))
-        if not steps:
-            steps = list(standing_footsteps(start, 0.0, T, fl))
-        steps.sort(key=lambda f: (f.t0, f.foot))
-        run_from = change[0] if change is not None and change[2] == "run" else \
-            runner or (bool(walk) and before == "run" and change is None)
-        motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground, run=run_from,
+        changes = sorted((c for c in (g.gait_change(spec.name) for g in goals) if c is not None), key=lambda c: c[0])
+        change = changes[0] if changes else None  # the first gait change shapes the generated footsteps
+        _check_walk_heading(scn, spec.name, any(g.step_rank(spec.name) == RANK_FOOTPRINTS for g in goals), T)
+        ctx = FootContext(spec.name, start, T, foot_length(ch), style_gait(styles[0][1]), change,
+                          {c.name: c for c in chars}, starts)
+        plan = plan_footsteps(goals, ctx)
+        steps = plan.steps
+        run_from = change[0] if change is not None and change[2] == "run" else plan.run
+        motion = initial_motion(ch, steps, 0.0, T, ground=ground, run=run_from,
                                 example=_example(scn, spec, styles))
-        chars.append(CharacterState(spec.name, ch, tuple(styles), tuple(steps), motion, start))
+        chars.append(CharacterState(spec.name, ch, tuple(styles), steps, motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     bounds = None
     if scn.timing == "free":

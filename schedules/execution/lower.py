@@ -1,7 +1,7 @@
 """Lowering: a Step over a Scene → the subproblems that solve it (one per character, or one
 joint NLP for a hard coupling).  The only reader of a Step's free blocks and terms.
 
-The contract (schedules/plan/step.py lists the vocabulary; tests/test_contract.py checks both
+The contract (schedules/plan/step.py lists the vocabulary; tests/execution/test_contract.py checks both
 sides): every free block and term the compiler writes is consumed here exactly as written,
 and :func:`check_step` rejects a Step with anything this module does not handle.
 
@@ -47,7 +47,7 @@ COUPLING_TARGET_HZ = 60.0  # rubber-band target points per second (at 10 Hz the 
 JOINT_COUPLING_HZ = 30.0  # hard hand-hold: coupling times (and force variables) per second
 COUPLED_FULL_MAX_ITER = 100  # a coupled character's full step: one move of the alternation (thesis §6.4.3)
 
-# What this module consumes (tests/test_contract.py: must cover step.declared_vocabulary())
+# What this module consumes (tests/execution/test_contract.py: must cover step.declared_vocabulary())
 HANDLED = ({("kind", k) for k in (FULL, "timing")} | {("role", r) for r in ROLES}
            | {("free", b) for b in ("q", "timewarp", "duration", "footprints", "lambda", "coupling_forces")}
            | {("term", t) for t in ("energy=number", "dynamics=hard", "dynamics=relaxed", "environment=hard",

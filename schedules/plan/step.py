@@ -53,7 +53,7 @@ FREE = "free"  # boundary:end of a receding window: the end state is free (the n
 Weight = float | str  # a number (a penalty weight or a spring stiffness) or HARD / RELAXED / FREE
 
 # --- the vocabulary of a Step: everything the compiler may write and the executor must honour ---
-# (schedules/execution/lower.py lists what it handles; tests/test_contract.py checks that what the compiler
+# (schedules/execution/lower.py lists what it handles; tests/execution/test_contract.py checks that what the compiler
 # emits is a subset of this vocabulary and that the lowering handles every item of it)
 STEP_KINDS = (TIMING, FULL)
 FREE_BLOCKS = ("q", "timewarp", "duration", "footprints", "lambda", "coupling_forces")

@@ -502,7 +502,7 @@ def bvh_cases(draw, seeds):
     raw = text.encode("utf-8")
     for _ in range(draw(st.sampled_from([0, 0, 0, 1, 2]))):
         raw = _mutate_bytes(draw, raw)
-        if len(raw) > 8_000_000:  # a 100 MB file is tested by tests/test_input_limits.py, not sent 1000 times
+        if len(raw) > 8_000_000:  # a 100 MB file is tested by tests/system/test_input_limits.py, not sent 1000 times
             raw = raw[:8_000_000]
     frames = draw(st.one_of(st.none(), st.tuples(st.integers(-5, 200), st.integers(-5, 400)),
                             st.tuples(st.sampled_from([0, 1, None]), st.sampled_from([None, 2, 3, 60, 10 ** 9]))))

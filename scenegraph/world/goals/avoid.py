@@ -14,8 +14,9 @@ import numpy as np
 
 from scenarios.weights import AVOID_WEIGHT
 
-from scenegraph.world.measure import avoid_measure, clamp, handle_track, horizontal_unit
 from scenegraph.problem import HandleTarget
+from scenegraph.world.footplan import RANK_WALK_AHEAD, StepPlan, walk_ahead
+from scenegraph.world.measure import avoid_measure, clamp, handle_track, horizontal_unit
 from scenegraph.world.goals.base import AdversarialGoal, where_of
 from scenegraph.world.goals.tackle import adversarial
 
@@ -40,6 +41,14 @@ class Avoid(AdversarialGoal):
 
     def springs(self, scene, me, budget: float, weight: float) -> list:
         return avoid_targets(scene, self, me, budget, weight)
+
+    def step_rank(self, who: str) -> int | None:
+        return RANK_WALK_AHEAD if who == self.character else None
+
+    @classmethod
+    def plan_steps(cls, goals: list, ctx) -> StepPlan:
+        """The dodger without a walk of its own walks straight ahead (its initial plan)."""
+        return walk_ahead(ctx)
 
     def entry(self, scene, audits) -> dict:
         return avoid_entry(self, avoid_measure(scene.character(self.character), scene.character(self.partner),

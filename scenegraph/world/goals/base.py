@@ -86,6 +86,22 @@ class GoalRecord:
         """Stage markers of the goal (default none)."""
         return []
 
+    def step_rank(self, who: str) -> int | None:
+        """This goal's say in planning ``who``'s initial footsteps: among a character's goals
+        the lowest rank plans them (:func:`scenegraph.world.footplan.plan_footsteps`); None:
+        no say (the default)."""
+        return None
+
+    @classmethod
+    def plan_steps(cls, goals: list, ctx):
+        """A :class:`~scenegraph.world.footplan.StepPlan` for ``ctx.who`` from its goals of this
+        kind and rank (file order)."""
+        raise NotImplementedError(f"{cls.kind} has a step rank but plans no footsteps")
+
+    def gait_change(self, who: str) -> tuple[float, float, str] | None:
+        """(time s, blend s, gait) when this goal changes ``who``'s gait (default: None)."""
+        return None
+
     def _entry(self, measured, what: str, unit: str = "m", **extra) -> dict:
         holds = extra.pop("holds", None)
         if holds is None:

@@ -48,6 +48,10 @@ class Coupling:
         """Physical springs of ``character`` (a hand-hold's; none for a carry)."""
         return ()
 
+    def loads(self, character: str) -> tuple[tuple[str, float], ...]:
+        """(handle, kg) this coupling hangs on ``character``'s body (default none)."""
+        return ()
+
     def entry(self, scene) -> dict:
         """Report entry: the largest distance between the held handles (two holders) or of a
         holder's handle from their centre, over the interval at 30 Hz (m), within ``tolerance``."""
@@ -86,6 +90,10 @@ class Carry(Coupling):
     @classmethod
     def from_schema(cls, name: str, c, scn, i: int) -> "Carry":
         return cls(**_common(name, c.holders, c, scn, i), mass=float(c.mass), tolerance=CARRY_TOL)
+
+    def loads(self, character: str) -> tuple[tuple[str, float], ...]:
+        """The carried mass shared equally by its holders (a static share)."""
+        return tuple((h, self.mass / len(self.handles)) for who, h in self.handles if who == character)
 
 
 COUPLING_KINDS = {k.kind: k for k in (HandHold, Carry)}

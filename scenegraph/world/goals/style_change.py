@@ -96,6 +96,11 @@ class StyleChange(GoalRecord):
                    where=where_of(scn, ("goals", j), name), style=g.style, gait=g.gait,
                    blend=None if g.blend is None else float(g.blend))
 
+    def gait_change(self, who: str) -> tuple[float, float, str] | None:
+        if self.gait is None or who != self.character:
+            return None
+        return (float(self.time), float(self.blend or DEFAULT_BLEND), self.gait)
+
     def entry(self, scene, audits) -> dict:
         if self.gait is None:
             return {"type": self.kind, "what": "style timeline applied (θ blended across the seam)",

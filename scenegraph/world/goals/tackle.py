@@ -15,9 +15,11 @@ import numpy as np
 
 from scenarios.weights import TARGET_WEIGHT
 
-from scenegraph.world.measure import body_frames, clamp, handle_track, horizontal_unit, ray_to_surface, tackle_measure
+from scenegraph.model.footsteps import gait_footsteps
 from scenegraph.problem import HandleTarget
+from scenegraph.world.footplan import RANK_CHASE, RANK_WALK_AHEAD, StepPlan, walk_ahead
 from scenegraph.world.goals.base import AdversarialGoal, where_of
+from scenegraph.world.measure import body_frames, clamp, handle_track, horizontal_unit, ray_to_surface, tackle_measure
 
 __all__ = ["Tackle", "tackle_targets", "tackle_entry", "TACKLE_CONTACT_TOL", "TACKLE_SPEED_TOL",
            "TACKLE_SPEED_LEAD"]
@@ -55,6 +57,29 @@ class Tackle(AdversarialGoal):
 
     def springs(self, scene, me, budget: float, weight: float) -> list:
         return tackle_targets(scene, self, me, budget, weight)
+
+    def step_rank(self, who: str) -> int | None:
+        """The attacker's run (2); the target walks straight ahead unless it walks (3)."""
+        return RANK_CHASE if who == self.character else RANK_WALK_AHEAD if who == self.partner else None
+
+    @classmethod
+    def plan_steps(cls, goals: list, ctx) -> StepPlan:
+        """The attacker: one run at constant speed from its start through a point 0.35 m short
+        of where the target's chest is at the (first) impact — the target's initial plan, or
+        its start when it is not built yet — kept up to the end of the scenario (a missed
+        tackle does not stop dead).  The target: :func:`~scenegraph.world.footplan.walk_ahead`."""
+        g = min(goals, key=lambda g: g.time)
+        if ctx.who != g.character:
+            return walk_ahead(ctx)
+        other = ctx.placed.get(g.partner)
+        aim = handle_track(other, "chest", [g.time])[0][:2] if other is not None else \
+            np.asarray(ctx.starts[g.partner], float)
+        s = np.asarray(ctx.start[:2])
+        d = aim - s
+        stop = aim - d / max(np.linalg.norm(d), 1e-6) * 0.35
+        end = s + (stop - s) * ctx.duration / max(g.time, 1e-6)
+        return StepPlan(tuple(gait_footsteps(s, end, 0.0, ctx.duration, foot_length=ctx.foot_length, before="run")),
+                        True)
 
     def entry(self, scene, audits) -> dict:
         m = tackle_measure(scene.character(self.character), scene.character(self.partner), self.time)

@@ -12,27 +12,68 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenegraph.world.measure import handle_track
+from scenegraph.model.footsteps import gait_footsteps, standing_footsteps, walk_footsteps
 from scenegraph.problem import HandleTarget
+from scenegraph.world.footplan import RANK_WALK, StepPlan
 from scenegraph.world.goals.base import GoalRecord, Marker, where_of
+from scenegraph.world.measure import handle_track
 
 __all__ = ["WalkTo"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class WalkTo(GoalRecord):
-    """target: (x, y) m; heading: rad or None (final facing)."""
+    """target: (x, y) m; heading: rad or None (final facing); waypoints: (x, y) m passed on the way."""
 
     kind = "walk_to"
     target: tuple[float, float]
     heading: float | None = None
+    waypoints: tuple[tuple[float, float], ...] = ()
 
     @classmethod
     def from_schema(cls, name: str, g, scn, j: int, plans_last=None) -> "WalkTo":
         return cls(name=name, character=g.character, time=float(g.time), tolerance=float(g.tolerance),
                    where=where_of(scn, ("goals", j), name),
                    target=(float(g.target[0]), float(g.target[1])),
-                   heading=None if g.heading is None else math.radians(g.heading))
+                   heading=None if g.heading is None else math.radians(g.heading),
+                   waypoints=tuple((float(w[0]), float(w[1])) for w in g.waypoints))
+
+    def step_rank(self, who: str) -> int | None:
+        return RANK_WALK if who == self.character else None
+
+    @classmethod
+    def plan_steps(cls, goals: list, ctx) -> StepPlan:
+        """Free footsteps along each walk's legs (start → waypoints → target) in time order,
+        each leg's time in proportion to its length, in the character's gait (through its gait
+        change, if any); then standing at the last target for the rest of the scenario, facing
+        the last walk's ``heading`` or else the direction from the start."""
+        steps, p, t = [], ctx.start[:2], 0.0
+        change, before = ctx.change, ctx.gait
+        for g in sorted(goals, key=lambda g: g.time):
+            pts = list(g.waypoints) + [g.target]
+            legs = [(np.asarray(a, float), np.asarray(b, float)) for a, b in zip([p] + pts[:-1], pts)]
+            lens = np.array([np.linalg.norm(b - a) for a, b in legs])
+            total = max(float(lens.sum()), 1e-9)
+            for (a, b), ln in zip(legs, lens):
+                dt = (g.time - t) * ln / total if total > 1e-6 else (g.time - t) / len(legs)
+                if dt <= 1e-6:
+                    continue
+                first = "r" if not steps else ("l" if steps[-1].foot == "r" else "r")
+                if change is not None and t - 1e-6 <= change[0] <= t + dt + 1e-6:
+                    steps += gait_footsteps(a, b, t, t + dt, change, foot_length=ctx.foot_length, first=first,
+                                            before=before)
+                elif before == "run":
+                    steps += gait_footsteps(a, b, t, t + dt, foot_length=ctx.foot_length, first=first, before="run")
+                else:
+                    steps += walk_footsteps(a, b, t, t + dt, foot_length=ctx.foot_length, first=first)
+                t += dt
+            p = g.target
+        if t < ctx.duration - 1e-6:
+            last = max(goals, key=lambda g: g.time)
+            h = math.atan2(*(np.asarray(p) - np.asarray(ctx.start[:2]))[::-1]) if last.heading is None \
+                else last.heading
+            steps += standing_footsteps((p[0], p[1], h), t, ctx.duration, ctx.foot_length)
+        return StepPlan(tuple(steps), before == "run" and change is None)
 
     def targets(self, scene, me, weight, window, hard: bool = False) -> list:
         z = float(handle_track(me, "pelvis", [self.time])[0][2])

@@ -20,7 +20,7 @@ from scenegraph.model.footsteps import Footstep
 from schedules.execution import checkpoints as ck
 from schedules.execution import executor as ex
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _step_data() -> dict:

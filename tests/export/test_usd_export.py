@@ -4,7 +4,7 @@ Golden files: ``tests/golden/two_characters.usda`` is compared *structurally* (p
 types, property names and types, array sizes, stage metadata; numbers with a tolerance).
 Regenerate it after a deliberate change of the stage layout with::
 
-    COMPOSE_REGEN_GOLDEN=1 python -m pytest tests/test_usd_export.py -k golden
+    COMPOSE_REGEN_GOLDEN=1 python -m pytest tests/export/test_usd_export.py -k golden
 
 and review the diff before committing it.
 """
@@ -28,7 +28,7 @@ from scenegraph.export import usd as usd_export  # noqa: E402
 from scenegraph.export.usd import (CharacterTrack, ForceArrow, Marker, export_usd, joint_paths,  # noqa: E402
                                    validate_stage)
 
-GOLDEN = Path(__file__).parent / "golden" / "two_characters.usda"
+GOLDEN = Path(__file__).resolve().parents[1] / "golden" / "two_characters.usda"
 FPS = 30.0
 
 

@@ -24,7 +24,7 @@ from scenegraph.world.scene import (TACKLE_CONTACT_TOL, adversarial_plans_last, 
                               build_scene, chest_front, goal_targets, reach_budget, tackle_measure, torso_distance)
 from schedules.cli.run import avoid_entry, goal_verdict, tackle_entry
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 # --- geometry of the measures ---------------------------------------------------------------------

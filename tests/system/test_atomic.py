@@ -13,7 +13,7 @@ import pytest
 from scenarios.atomic import WriteError, atomic_path, atomic_write, file_mode
 from scenarios.errors import ComposeError, InputError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture()

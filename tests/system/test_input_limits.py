@@ -17,7 +17,7 @@ from scenegraph.mocap import bvh as bvh_mod
 from scenegraph.mocap.bvh import parse_bvh, read_bvh
 from scenegraph.mocap.clip import read_clip
 
-CLIP = Path(__file__).resolve().parents[1] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
+CLIP = Path(__file__).resolve().parents[2] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
 MINIMAL = "name: m\nduration: 1.2\ncharacters:\n  - name: a\n"
 
 

@@ -12,7 +12,7 @@ import pytest
 from scenegraph.model.footsteps import (FOOT_WIDTH, GAITS, footsteps_for_walk, gait_footsteps, standing_footsteps,
                                   walk_footsteps)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _lateral(steps, heading=(1.0, 0.0)) -> set[float]:
@@ -38,7 +38,7 @@ def test_every_generated_plan_puts_the_feet_foot_width_apart(steps):
 
 # modules that construct footsteps without generating a plan, and why
 NOT_GENERATORS = {
-    "scenegraph/world/scene.py": "_explicit_footsteps: one Footstep per footprint written in the scenario",
+    "scenegraph/world/goals/footprints.py": "Footprints.plan_steps: one Footstep per footprint written in the scenario",
     "scenegraph/mocap/contacts.py": "its own Footstep type: contacts detected in a mocap clip",
     "schedules/execution/checkpoints.py": "reads footsteps stored in a checkpoint",
     "schedules/cli/learn.py": "footsteps measured from a mocap clip (the learning target)",

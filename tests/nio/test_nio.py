@@ -122,7 +122,7 @@ def test_compose_learn_end_to_end(tmp_path):
 
     from schedules.cli.main import main
     from scenegraph.model.style import load_style
-    clip = Path(__file__).resolve().parents[1] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
+    clip = Path(__file__).resolve().parents[2] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
     out = tmp_path / "w.yaml"
     assert main(["learn", str(clip), "--frames", "64:201", "--max-iter", "3", "--alpha-floor", "0.2",
                  "-o", str(out)]) == 0
@@ -238,7 +238,7 @@ def test_shipped_styles_have_provenance():
     from pathlib import Path
 
     from scenegraph.model.style import load_style
-    root = Path(__file__).resolve().parents[1] / "scenarios"
+    root = Path(__file__).resolve().parents[2] / "scenarios"
     files = sorted((root / "styles").glob("*.yaml"))
     if not files:
         pytest.skip("no learned style shipped yet")
@@ -270,7 +270,7 @@ def test_real_resynthesis_of_shipped_walk():
     from scenegraph.nio import resynthesize_from_example
     from scenegraph.model.style import load_style
 
-    root = Path(__file__).resolve().parents[1] / "scenarios"
+    root = Path(__file__).resolve().parents[2] / "scenarios"
     walk = load_style(root / "styles" / "walk.yaml")
     ch, XT, steps, _ = clip_target(root / "clips" / walk.provenance.clip,
                                    tuple(map(int, walk.provenance.frames.split(":"))), walk.provenance.body)

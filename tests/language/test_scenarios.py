@@ -20,7 +20,7 @@ from scenarios.schema import joint_dofs
 from schedules.cli.main import main
 from schedules.cli.scenario import check_scenario
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]
 BAD = sorted((HERE / "bad_inputs").glob("*.yaml"))
 FULL = HERE / "scenarios" / "full.yaml"
 BUNDLED = list(bundled_scenarios())

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 
-_spec = importlib.util.spec_from_file_location("fuzz_inputs", Path(__file__).parent / "benchmarks" / "fuzz_inputs.py")
+_spec = importlib.util.spec_from_file_location("fuzz_inputs", Path(__file__).resolve().parents[1] / "benchmarks" / "fuzz_inputs.py")
 fuzz = importlib.util.module_from_spec(_spec)
 sys.modules["fuzz_inputs"] = fuzz  # dataclasses look their module up by name
 _spec.loader.exec_module(fuzz)

@@ -14,7 +14,7 @@ from schedules.cli.main import main
 from schedules.plan.compiler import layer_windows
 from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 
-FULL = Path(__file__).resolve().parent / "scenarios" / "full.yaml"
+FULL = Path(__file__).resolve().parents[1] / "scenarios" / "full.yaml"
 
 
 def _compile(name_or_text: str, extra: str = "") -> Schedule:

@@ -10,7 +10,7 @@ import pytest
 from scenarios import versions
 from scenarios.versions import SOURCE_VERSION, compose_version, package_versions
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_installed_versions_are_the_metadata_ones():

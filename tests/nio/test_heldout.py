@@ -12,7 +12,7 @@ import pytest
 from scenegraph.nio import heldout as H
 from scenegraph.model.body import JOINT_DOF_NAMES, N_DOF, N_ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 WALK_STYLE = ROOT / "scenarios" / "styles" / "walk.yaml"
 
 

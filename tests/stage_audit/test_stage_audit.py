@@ -16,7 +16,7 @@ from scenegraph.stage_audit import AuditSettings, audit_stage
 from scenegraph.stage_audit.momenta import G
 
 pxr = pytest.importorskip("pxr")
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 # --- synthetic stages ------------------------------------------------------------------------

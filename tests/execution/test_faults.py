@@ -1,7 +1,7 @@
 """Runs that survive faults (issue #17): SIGINT/SIGTERM stop cleanly, a step's unexpected
 exception is that step's named failure, SIGKILL never leaves a half-written file at a final path.
 
-Most tests replace the executor's solves with cheap fakes (like tests/test_checkpoints.py);
+Most tests replace the executor's solves with cheap fakes (like tests/execution/test_checkpoints.py);
 one runs the real ``walk`` (iterations capped) and sends SIGINT while its second step solves.
 The SIGKILL-and-resume comparison on real solves is ``tests/benchmarks/bench_faults.py``.
 """
@@ -27,7 +27,7 @@ from schedules.execution import executor as ex
 from schedules.execution import interrupts
 from schedules.cli.main import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _env(**extra) -> dict:

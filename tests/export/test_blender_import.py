@@ -5,7 +5,7 @@ needs numpy < 2), so it lives in its own virtual environment.  The test runs Ble
 subprocess with that environment's interpreter, so the project's environment stays as is:
 
     python3.11 -m venv /tmp/bpyenv && /tmp/bpyenv/bin/pip install bpy
-    COMPOSE_BPY_PYTHON=/tmp/bpyenv/bin/python python -m pytest tests/test_blender_import.py
+    COMPOSE_BPY_PYTHON=/tmp/bpyenv/bin/python python -m pytest tests/export/test_blender_import.py
 
 (bpy's Python version must match the wheel: bpy 4.2–5.0 are built for Python 3.11.)
 If ``bpy`` is importable in the test's own interpreter, that interpreter is used.  Without

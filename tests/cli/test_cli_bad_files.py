@@ -12,8 +12,8 @@ import pytest
 
 from schedules.cli.main import main
 
-BAD = Path(__file__).parent / "bad_inputs"
-GOLDEN = Path(__file__).parent / "golden" / "two_characters.usda"
+BAD = Path(__file__).resolve().parents[1] / "bad_inputs"
+GOLDEN = Path(__file__).resolve().parents[1] / "golden" / "two_characters.usda"
 
 STAGES = {  # file → fragment of the error
     "png_renamed.usda": "not a readable USD stage",

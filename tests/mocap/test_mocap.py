@@ -18,9 +18,9 @@ from scenegraph.mocap.contacts import detect_footsteps
 from scenegraph.model.rotations import quat_from_matrix
 from scenegraph.mocap.clip import load_clip, load_rig, read_clip
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CLIPS = ROOT / "scenarios" / "clips"
-BAD = Path(__file__).resolve().parent / "bad_bvh"
+BAD = Path(__file__).resolve().parents[1] / "bad_bvh"
 C0701 = CLIPS / "walk_neutral_cmu_07_01.bvh"
 
 # file: (frames, has T-pose, rig variant) — as in the mocap delivery's README
@@ -317,7 +317,7 @@ def test_reconstruct_one_gait_cycle():
 
 # the shared delivery folder sits next to the repository (<repo>/../shared/mocap), or where
 # COMPOSE_SHARED_MOCAP points
-SHARED_MOCAP = Path(os.environ.get("COMPOSE_SHARED_MOCAP") or Path(__file__).resolve().parents[2] / "shared" / "mocap")
+SHARED_MOCAP = Path(os.environ.get("COMPOSE_SHARED_MOCAP") or Path(__file__).resolve().parents[3] / "shared" / "mocap")
 SHARED_TURN = SHARED_MOCAP / "walk_turn_left_cmu_16_18.bvh"
 
 

@@ -29,7 +29,7 @@ from schedules.plan.compiler import compile_schedule
 from schedules.execution.lower import HANDLED, check_step, lower, lower_joint
 from schedules.plan.step import HARD, declared_vocabulary, vocabulary
 
-FULL_YAML = __import__("pathlib").Path(__file__).parent / "scenarios" / "full.yaml"
+FULL_YAML = __import__("pathlib").Path(__file__).resolve().parents[1] / "scenarios" / "full.yaml"
 
 
 def _variant(name: str, extra: str = "", replace_: tuple[str, str] | None = None):
