@@ -354,8 +354,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--run-dir", metavar="DIR", help="checkpoint folder; default runs/<scenario name>")
     p.add_argument("--fps", type=float, default=30.0, help="frame rate of the exported stage (default 30)")
     p.add_argument("--fail-capped", action="store_true",
-                   help="fail the run when a full step stops at its iteration cap, even with every constraint "
-                        "satisfied (default: such a step is kept, with its status in the report)")
+                   help="fail the run when a full step stops unconverged (its iteration cap, or a numerical "
+                        "breakdown such as a failed restoration phase), even with every constraint satisfied "
+                        "(default: such a step is kept, with its status in the report)")
     p.add_argument("--scheduler", metavar="local|processes|sync|ADDRESS",
                    help="run the steps as a Dask task graph: local (LocalCluster of --jobs worker processes), "
                         "processes, sync, or a Dask scheduler address such as tcp://host:8786 (docs/distributed.md); "

@@ -34,7 +34,8 @@ from pathlib import Path
 from scenarios.errors import InputError, Location
 
 from schedules.execution.checkpoints import RunLock, write_checkpoint
-from schedules.execution.executor import (RunResult, StepFailed, _fmt_s, _record, _resumed, _resumed_step, prepare_run_dir)
+from schedules.execution.executor import (RunResult, StepFailed, _fmt_s, _record, _resumed, _resumed_step, kept_warning,
+                                         prepare_run_dir)
 from schedules.execution.graph_tasks import apply_results, presolve_task_key, schedule_graph, step_task_key
 from schedules.plan.step import Schedule
 
@@ -242,8 +243,7 @@ def _run(scene, schedule, sched, run_dir, fingerprint, resume, fail_capped, stor
               f"{rec.iterations} it, E={rec.energy:.4g}, {rec.seconds:.1f} s{stored}; "
               f"elapsed {_fmt_s(elapsed)}, ETA {_fmt_s(eta)}", file=log, flush=True)
         if d.get("capped"):
-            print(f"    warning: {s.id} reached its iteration cap; kept as feasible, not converged",
-                  file=log, flush=True)
+            print(kept_warning(s.id, rec.status), file=log, flush=True)
         if d.get("discarded"):
             print(f"    {s.id}: timing result discarded ({d.get('discard_reason', '')})", file=log, flush=True)
 

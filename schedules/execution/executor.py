@@ -20,8 +20,9 @@ Semantics (kept identical for every ``--jobs``):
   (:class:`~schedules.execution.checkpoints.RunLock`) while a run writes it.
 * A Step fails if IPOPT does not report success or a hard constraint group is violated by
   more than ``VIOLATION_TOL``; the run stops with :class:`StepFailed` (exit code 1), naming
-  the step and the violated groups.  Two exceptions: a *full* step that hit its iteration
-  cap with every hard constraint satisfied is kept with a warning (unless ``fail_capped``),
+  the step and the violated groups.  Two exceptions: a *full* step that stopped unconverged
+  (its iteration cap or a numerical breakdown, ``UNCONVERGED``) with every hard constraint
+  satisfied is kept with a warning (unless ``fail_capped``),
   and a *timing* step that did not converge or violates a constraint is discarded (the full
   step after it starts from the state before it).  The run folder keeps every finished Step.
 * SIGINT/SIGTERM stop the run at once (:mod:`schedules.execution.interrupts`): the interrupted step is
@@ -396,17 +397,30 @@ def _resumed_step(old: dict | None, run_dir: Path, number: int, step_id: str, fi
     return d
 
 
+# IPOPT stops that end without convergence but can leave a feasible iterate behind (``solve``
+# returns the best feasible iterate it passed): the iteration cap, and numerical breakdowns of
+# the step computation or the line search.  Seen: handhold's child window with one MUMPS thread
+# (OMP_NUM_THREADS=1, as on Dask workers) ended Restoration_Failed after 56 iterations with every
+# constraint held, and the whole run failed; walk_to_run's seam Error_In_Step_Computation.
+UNCONVERGED = {"Maximum_Iterations_Exceeded": "reached its iteration cap",
+               "Restoration_Failed": "ended in a failed restoration phase",
+               "Error_In_Step_Computation": "could not compute a step",
+               "Search_Direction_Becomes_Too_Small": "stopped on a vanishing search direction"}
+
+
 def judge(step: Step, d: dict, fail_capped: bool) -> dict:
     """The acceptance policy (plain and Dask executors) on a solved Step's data, in place: a timing step that
-    failed or violates a hard group gets ``discarded``; a full step that failed (a capped one
-    with every hard group held is accepted unless ``fail_capped``) gets ``failed`` (the
-    message); ``capped`` marks an accepted full step at its iteration cap."""
+    failed or violates a hard group gets ``discarded``; a full step that failed gets ``failed``
+    (the message) — except that one stopped unconverged (``UNCONVERGED``) with every hard group
+    held is accepted unless ``fail_capped``, marked ``capped`` (kept as feasible, not
+    converged; its status stays in the report)."""
     rec = _record(0, step, d)
     # a timing step is a warm start for the full step after it, used only when it converged (capped
-    # ones left feet sliding by up to 0.5 m between collocation points); a full step at its cap that
-    # holds every constraint is kept: the final audit and goals judge the run
+    # ones left feet sliding by up to 0.5 m between collocation points); a full step that stopped
+    # unconverged but holds every constraint is kept: the final audit and goals judge the run
     bad = _hard_violations(rec.violations)
-    capped = rec.status == "Maximum_Iterations_Exceeded"
+    chars = d["characters"].values()
+    capped = not rec.success and all(c["success"] or c["status"] in UNCONVERGED for c in chars)
     accepted = rec.success or (capped and step.kind == FULL and not fail_capped)
     if step.kind == FULL and capped and accepted and not bad:
         d["capped"] = True
@@ -419,6 +433,13 @@ def judge(step: Step, d: dict, fail_capped: bool) -> dict:
         d["failed"] = (f"step {step.id!r} failed: IPOPT status {rec.status} after {rec.iterations} iterations; "
                        f"violated constraint groups: {groups} (tolerance {VIOLATION_TOL:g})")
     return d
+
+
+def kept_warning(step_id: str, status: str) -> str:
+    """The line printed for a full step kept as feasible, not converged (``status``: the step
+    record's, ``;``-joined over its characters)."""
+    why = "; ".join(dict.fromkeys(UNCONVERGED[s] for s in status.split(";") if s in UNCONVERGED)) or status
+    return f"    warning: {step_id} {why}; kept as feasible, not converged"
 
 
 def run_schedule(scene: Scene, schedule: Schedule, *, run_dir: str | os.PathLike, fingerprint: str,
@@ -529,8 +550,7 @@ def _run_locked(scene: Scene, schedule: Schedule, run_dir: Path, fingerprint: st
                       f"elapsed {_fmt_s(elapsed)}, ETA {_fmt_s(eta)}", file=log, flush=True)
                 judge(s, d, fail_capped)
                 if d.get("capped"):
-                    print(f"    warning: {s.id} reached its iteration cap; kept as feasible, not converged",
-                          file=log, flush=True)
+                    print(kept_warning(s.id, rec.status), file=log, flush=True)
                 if d.get("discarded"):  # the full step after it starts from the state before it
                     print(f"    {s.id}: timing result discarded ({d['discard_reason']})", file=log, flush=True)
                 elif d.get("failed"):

@@ -86,7 +86,8 @@ def compose_cmd() -> list[str]:
     return [exe] if exe else [sys.executable, "-c", "import sys; from schedules.cli.main import main; sys.exit(main())"]
 
 
-CAPPED = ("Maximum_Iterations_Exceeded", "Stalled")
+CAPPED = ("Maximum_Iterations_Exceeded", "Stalled", "Restoration_Failed", "Error_In_Step_Computation",
+          "Search_Direction_Becomes_Too_Small")  # stopped unconverged (kept when feasible: executor.UNCONVERGED)
 
 
 def run(label: str, target: str, tmp: Path) -> dict:
