@@ -39,6 +39,8 @@ class Footstep:
     heel: tuple[float, float] | None = WALK_HEEL
     ball: tuple[float, float] | None = WALK_BALL
     free: bool = False
+    bounds: tuple[tuple[float, float], tuple[float, float]] | None = None  # a free ball position's
+    # ((x_min, y_min), (x_max, y_max)) m; None: within 0.5 m of ``position`` (a jump's landing region)
 
     def __post_init__(self):
         if self.foot not in ("l", "r"):

@@ -31,7 +31,8 @@ from .footsteps import GAITS, Footstep, foot_length, gait_footsteps, standing_fo
 from .gait import initial_motion, style_gait
 from .ground import FLAT, Ground, ground_from_environment
 from .motion import Motion
-from .goals import Coupling, GoalRecord, coupling_records, goal_records
+from .goals import Coupling, GoalRecord, Jump, coupling_records, goal_records
+from .leaps import leap_footsteps, leap_motion
 from .goals.tackle import TACKLE_CONTACT_TOL
 from .measure import (avoid_measure, body_frames, chest_front, handle_track, reach_budget,
                       tackle_measure, torso_distance)
@@ -271,6 +272,9 @@ def build_scene(scn: Scenario) -> Scene:
         for _, g in scn.named_goals():
             if isinstance(g, FootprintsGoal) and g.character == spec.name:
                 steps += _explicit_footsteps(g, start[2], fl)
+        leaps = sorted((g for g in goals if isinstance(g, Jump) and g.character == spec.name), key=lambda g: g.t_off)
+        if leaps and not steps:  # jumps and hops: ground and flight stages (scenegraph/leaps.py)
+            steps = list(leap_footsteps(leaps, start, T, fl))
         walk = [g for g in scn.goals if isinstance(g, WalkToGoal) and g.character == spec.name]
         gaits = [g for g in scn.goals if isinstance(g, StyleChangeGoal) and g.character == spec.name and g.gait]
         change = None
@@ -332,8 +336,8 @@ def build_scene(scn: Scenario) -> Scene:
         steps.sort(key=lambda f: (f.t0, f.foot))
         run_from = change[0] if change is not None and change[2] == "run" else \
             runner or (bool(walk) and before == "run" and change is None)
-        motion = initial_motion(ch, tuple(steps), 0.0, T, ground=ground, run=run_from,
-                                example=_example(scn, spec, styles))
+        motion = leap_motion(ch, leaps, start, T) if leaps else \
+            initial_motion(ch, tuple(steps), 0.0, T, ground=ground, run=run_from, example=_example(scn, spec, styles))
         chars.append(CharacterState(spec.name, ch, tuple(styles), tuple(steps), motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     bounds = None

@@ -51,7 +51,8 @@ from dataclasses import dataclass, field
 import networkx as nx
 
 from scenarios.errors import InputError
-from scenarios.schema import FootprintsGoal, HandHold, Scenario, ScheduleSpec, StyleChangeGoal, TackleGoal
+from scenarios.schema import (FootprintsGoal, HandHold, HopGoal, JumpGoal, Scenario, ScheduleSpec, StyleChangeGoal,
+                              TackleGoal)
 from scenarios.weights import START_WEIGHT
 
 from .step import (COUPLED, DECREASING_HORIZON, FREE, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
@@ -258,6 +259,8 @@ def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ..
         for gname, goal in st.goals_of[ch]:
             if goal.active(w):  # the goal kind's plan facts (scenarios/schema.py)
                 goals[f"goal:{gname}"] = goal.plan_weight
+                if isinstance(goal, (JumpGoal, HopGoal)):  # its flight stage is ballistic
+                    goals[f"flight:{gname}"] = HARD
         for cname, c, members in st.couplings_of[ch]:
             if not _interval_meets(c.interval, w):
                 continue

@@ -13,16 +13,19 @@ from .avoid import Avoid
 from .base import GoalRecord, violated_by, where_of
 from .couplings import COUPLING_KINDS, Carry, Coupling, HandHold
 from .footprints import Footprints
+from .jump import Hop, Jump
+from .keyframes import Keyframes
 from .reach import Reach
 from .style_change import StyleChange
 from .tackle import Tackle
 from .walk_to import WalkTo
 
 __all__ = ["GOAL_KINDS", "COUPLING_KINDS", "GoalRecord", "Coupling", "WalkTo", "Reach", "Tackle", "Avoid",
-           "Footprints", "StyleChange", "HandHold", "Carry", "goal_records", "coupling_records", "where_of",
+           "Footprints", "StyleChange", "Jump", "Hop", "Keyframes", "HandHold", "Carry", "goal_records", "coupling_records", "where_of",
            "violated_by"]
 
-GOAL_KINDS: dict[str, type[GoalRecord]] = {k.kind: k for k in (Footprints, WalkTo, Reach, Tackle, Avoid, StyleChange)}
+GOAL_KINDS: dict[str, type[GoalRecord]] = {k.kind: k for k in (Footprints, WalkTo, Reach, Tackle, Avoid, StyleChange,
+                                                          Jump, Hop, Keyframes)}
 
 
 def goal_records(scn, plans_last: dict[frozenset, str]) -> tuple[GoalRecord, ...]:

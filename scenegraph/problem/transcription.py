@@ -396,9 +396,19 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             rho_extra.append(np.sqrt(targ.weight) * d)
     for pose in sp.poses:
         q_t, qd_t, _ = state_at(pose.t)
+        if pose.dofs is not None:  # a partial pose (a keyframe's heading and joint angles)
+            rho_extra.append(np.sqrt(pose.weight) * (q_t[list(pose.dofs)] - ca.DM(pose.q)[list(pose.dofs)]))
+            continue
         rho_extra.append(np.sqrt(pose.weight) * (q_t - ca.DM(pose.q)))
         if pose.velocity is not None:
             rho_extra.append(0.1 * np.sqrt(pose.weight) * (qd_t - ca.DM(pose.velocity)))
+    # flight stages (thesis ch. 3): no contact, and no root residual either — gravity alone moves
+    # the centre of mass and the angular momentum about it stays constant (in units of m g)
+    for fa, fb in sp.flights:
+        sa, sb = m.to_canonical([fa, fb])
+        ks = np.flatnonzero((s > sa + 1e-6) & (s < sb - 1e-6) & _depend_on_free(K, s, mask, warp_free))
+        if len(ks) and sp.dynamics != "kinematic":
+            add("flight", QQ[N_JOINT:, ks.tolist()] / mg, 0.0, 0.0)
     for a in sp.avoid:
         q_t, _, _ = state_at(a.t)
         i = hk_names.index(a.handle)
@@ -491,6 +501,10 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         fp0 += list(sp.footsteps[si].position)
     lbx[2] = np.asarray(fp0) - 0.5
     ubx[2] = np.asarray(fp0) + 0.5
+    for j, si in enumerate(free_steps):  # a footstep with bounds (a jump's landing region) keeps in them
+        b = sp.footsteps[si].bounds
+        if b is not None:
+            lbx[2][2 * j:2 * j + 2], ubx[2][2 * j:2 * j + 2] = b[0], b[1]
     x0[2] = np.asarray(fp0)
 
     x = ca.vertcat(xP, xW, xF, xL)

@@ -1,0 +1,193 @@
+"""Jumps and hops as stages: ground contacts (footsteps), flights, and an initial motion.
+
+A character's leaps (:class:`scenegraph.goals.jump.Jump` records, in time order) cut its
+motion into stages (thesis §3.4): a ground stage before each take-off, a flight stage from
+take-off to landing (no footstep: no contact force; the transcription makes the root
+residual zero there, so the centre of mass falls with g and the angular momentum about it
+is constant), and a ground stage after the landing.  This module turns the leaps into
+
+* footsteps (:func:`leap_footsteps`): both feet (a jump) or one foot (a hop) planted at the
+  take-off until the take-off time, the heel lifting LEAP_HEEL_LIFT before it; planted at the
+  landing from the landing time, ball first, heel LEAP_HEEL_DOWN later.  A region instead of a
+  position gives a free footprint bounded by it (``Footstep.bounds``);
+* flights (:func:`leap_flights`): (take-off, landing) world seconds;
+* an initial motion (:func:`leap_motion`): a countermovement dip before the take-off, a
+  ballistic pelvis parabola in flight (vertical speed g·t_f/2 at take-off), a landing dip,
+  the heading turning through the flight, arms swinging back in the dip and forward at the
+  take-off.  The solver starts from it; nothing of it is held.
+
+Units: m, s, rad; world frame z up, headings from +X counter-clockwise.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .body import N_DOF, Character, standing_pose
+from .footsteps import FOOT_WIDTH, Footstep
+from .motion import Motion
+
+__all__ = ["leap_footsteps", "leap_flights", "leap_motion", "LEAP_HEEL_LIFT", "LEAP_HEEL_DOWN", "DIP",
+           "HOP_SWAP"]
+
+LEAP_HEEL_LIFT = 0.12  # s: the heel leaves the ground this long before the take-off (the push-off on the ball)
+LEAP_HEEL_DOWN = 0.05  # s: the heel meets the ground this long after the ball at a landing
+DIP = 0.14  # m: pelvis drop of the countermovement and the landing absorption of a jump (CMU 16_05: 0.13)
+HOP_SWAP = 0.3  # s: after a hop's landing the other foot comes down this long later (or half the stance)
+G = 9.81
+D = np.deg2rad
+
+
+def _feet(P, heading: float, foot_length: float, foot: str | None) -> dict[str, tuple[float, float]]:
+    """Ball positions (x, y) of the feet standing around P (a jump: the feet midpoint; a hop:
+    the hopping foot's heel-ball midpoint, the other foot FOOT_WIDTH to its side)."""
+    u = np.array([math.cos(heading), math.sin(heading)])
+    lat = np.array([-u[1], u[0]])
+    P = np.asarray(P, float)
+    out = {}
+    for f, side in (("l", 1.0), ("r", -1.0)):
+        if foot is None:
+            c = P + side * FOOT_WIDTH / 2 * lat
+        elif f == foot:
+            c = P
+        else:
+            c = P + (FOOT_WIDTH if foot == "r" else -FOOT_WIDTH) * lat
+        b = c + u * foot_length / 2
+        out[f] = (float(b[0]), float(b[1]))
+    return out
+
+
+def _bounds(region, heading: float, foot_length: float, offset) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Bounds of a ball position whose feet midpoint lies in ``region`` ((x0, y0), (x1, y1))."""
+    (x0, y0), (x1, y1) = region
+    return ((x0 + offset[0], y0 + offset[1]), (x1 + offset[0], y1 + offset[1]))
+
+
+def _stance(foot, P, heading, t0, t1, *, lift: bool, land: bool, free=False, bounds=None, ball_xy=None):
+    span = t1 - t0
+    a = min(LEAP_HEEL_DOWN / span, 0.3) if land else 0.0
+    b = 1.0 - min(LEAP_HEEL_LIFT / span, 0.4) if lift else 1.0
+    return Footstep(foot, ball_xy, float(t0), float(t1), float(heading), heel=(a, b), ball=(0.0, 1.0), free=free,
+                    bounds=bounds)
+
+
+def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep, ...]:
+    """Footsteps of a character that stands at ``start`` (x, y, heading; m, rad) and leaps
+    ``leaps`` (Jump records in time order) within [0, T] s."""
+    steps: list[Footstep] = []
+    P, h = (start[0], start[1]), start[2]
+    t_prev, prev_foot, prev_region = 0.0, None, None  # start: standing on both feet
+    seq = list(leaps) + [None]
+    for k, lp in enumerate(seq):
+        t_end = lp.t_off if lp is not None else T
+        feet_next = ("l", "r") if lp is None or lp.foot is None else (lp.foot,)
+        down = ("l", "r") if prev_foot is None else (prev_foot,)
+        balls = _feet(P, h, foot_length, prev_foot)
+        for f in ("l", "r"):
+            on_from = t_prev if f in down else None
+            if on_from is None and (f in feet_next or lp is None):  # the other foot comes down after a hop
+                on_from = t_prev + min(HOP_SWAP, (t_end - t_prev) / 2)
+            if on_from is None:
+                continue
+            off_at = t_end
+            if lp is not None and f not in feet_next:  # lifts before a hop on the other foot
+                off_at = on_from + (t_end - on_from) / 2
+            if off_at - on_from < 0.05:
+                continue
+            bounds = None
+            if prev_region is not None:
+                mid = np.asarray(balls[f]) - np.asarray(P)
+                bounds = _bounds(prev_region, h, foot_length, mid)
+            steps.append(_stance(f, P, h, on_from, off_at, lift=lp is not None and f in feet_next,
+                                 land=k > 0 and f in down, free=bounds is not None, bounds=bounds,
+                                 ball_xy=balls[f]))
+        if lp is None:
+            break
+        P, h = lp.landing, lp.heading + lp.turn
+        t_prev, prev_foot, prev_region = lp.t_land, lp.foot, lp.landing_region
+    steps.sort(key=lambda f: (f.t0, f.foot))
+    return tuple(steps)
+
+
+def leap_flights(leaps) -> tuple[tuple[float, float], ...]:
+    """(take-off, landing) world seconds of each leap."""
+    return tuple((float(lp.t_off), float(lp.t_land)) for lp in leaps)
+
+
+def _hermite(t, knots):
+    """Piecewise cubic Hermite through knots [(t, value, slope)] (clamped to the ends)."""
+    ts = np.array([k[0] for k in knots])
+    out = np.empty_like(t)
+    for i, x in enumerate(t):
+        if x <= ts[0]:
+            out[i] = knots[0][1]
+            continue
+        if x >= ts[-1]:
+            out[i] = knots[-1][1]
+            continue
+        j = int(np.searchsorted(ts, x)) - 1
+        (t0, y0, m0), (t1, y1, m1) = knots[j], knots[j + 1]
+        hh = t1 - t0
+        s = (x - t0) / hh
+        out[i] = ((2 * s ** 3 - 3 * s ** 2 + 1) * y0 + (s ** 3 - 2 * s ** 2 + s) * hh * m0
+                  + (-2 * s ** 3 + 3 * s ** 2) * y1 + (s ** 3 - s ** 2) * hh * m1)
+    return out
+
+
+def leap_motion(ch: Character, leaps, start, T: float, ctrl_per_second: float = 24.0) -> Motion:
+    """The initial motion over [0, T] s of a character standing at ``start`` (x, y, heading)
+    and leaping ``leaps`` (see the module docstring)."""
+    t = np.linspace(0.0, T, max(8, int(T * 60) + 1))
+    stand = standing_pose(ch)
+    z0 = stand[2] * 0.97
+    q = np.zeros((len(t), N_DOF))
+    xy = np.tile(np.array(start[:2], float), (len(t), 1))
+    dz = np.zeros(len(t))
+    yaw = np.full(len(t), float(start[2]))
+    crouch = np.zeros(len(t))  # 0 standing … 1 deepest dip
+    swing = np.zeros(len(t))  # arm swing: −1 back … +1 forward
+    tuck = np.zeros(len(t))
+    P, h = np.array(start[:2], float), float(start[2])
+    for lp in leaps:
+        tf = lp.t_land - lp.t_off
+        dip = DIP if lp.foot is None else DIP / 2
+        ramp = 0.3
+        Q = np.asarray(lp.landing, float)
+        v = (Q - P) / (tf + ramp)
+        for c in range(2):  # horizontal: at rest over P, ballistic speed v in flight, at rest over Q
+            xy[:, c] += _hermite(t, [(lp.t_off - ramp, 0.0, 0.0), (lp.t_off, v[c] * ramp / 2, v[c]),
+                                     (lp.t_land, v[c] * (ramp / 2 + tf), v[c]),
+                                     (lp.t_land + ramp, Q[c] - P[c], 0.0)])
+        vz = G * tf / 2
+        rise = 0.05
+        ground = [(lp.t_off - 0.75, 0.0, 0.0), (lp.t_off - 0.3, -dip, 0.0), (lp.t_off, rise, vz)]
+        after = [(lp.t_land, rise, -vz), (lp.t_land + 0.22, -dip, 0.0), (lp.t_land + 0.6, 0.0, 0.0)]
+        inside = (t > lp.t_off) & (t < lp.t_land)
+        z = _hermite(t, ground + after)
+        tau = t[inside] - lp.t_off
+        z[inside] = rise + vz * tau - G * tau ** 2 / 2
+        dz += z
+        crouch += np.clip(-np.minimum(z, 0.0) / dip, 0.0, 1.0)
+        yaw += lp.turn * np.clip((t - lp.t_off) / tf, 0.0, 1.0)
+        w = np.interp(t, [lp.t_off - 0.75, lp.t_off - 0.3, lp.t_off, lp.t_land, lp.t_land + 0.4, lp.t_land + 0.8],
+                      [0.0, -1.0, 1.0, 0.6, 0.3, 0.0])
+        swing += w
+        tuck += np.interp(t, [lp.t_off, (lp.t_off + lp.t_land) / 2, lp.t_land], [0.0, 1.0, 0.0])
+        P, h = Q, lp.heading + lp.turn
+    hops = {lp.foot for lp in leaps if lp.foot is not None}
+    for side in ("l", "r"):
+        idx = ch.dof_index
+        free_leg = 0.0 if not hops or side in hops else 1.0
+        q[:, idx(f"hip_flex_{side}")] = D(8) + D(70) * crouch + D(35) * tuck + D(30) * free_leg
+        q[:, idx(f"knee_flex_{side}")] = D(8) + D(95) * crouch + D(45) * tuck + D(60) * free_leg
+        q[:, idx(f"ankle_flex_{side}")] = D(30) * crouch
+        q[:, idx(f"shoulder_flex_{side}")] = D(60) * swing
+        q[:, idx(f"shoulder_abd_{side}")] = D(8)
+        q[:, idx(f"elbow_flex_{side}")] = D(25)
+    q[:, 0:2] = xy
+    q[:, 2] = z0 + dz - 0.25 * DIP * crouch  # the thighs' flexion lowers the hips further
+    q[:, 3] = yaw
+    q[:, 4] = D(4) + D(25) * crouch  # trunk leans forward in the dip
+    q[:, 6:] = np.clip(q[:, 6:], ch.lower[6:], ch.upper[6:])
+    return Motion.from_samples(t, q, max(6, int(round(T * ctrl_per_second)) + 3))
