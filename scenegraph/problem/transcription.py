@@ -50,8 +50,10 @@ from ..residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compile
                         kernel_hessian, theta_kernel_vector)
 from .subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["NLP", "transcribe", "window_mask", "OBJ_SCALE", "KIN_WEIGHT", "FREE_WEIGHT_MIN"]
+__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
+           "FREE_WEIGHT_MIN"]
 
+W_FLIGHT = 1e6  # root residual weight in flight stages (W_ROOT elsewhere): a jump's flight is ballistic
 OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
 KIN_WEIGHT = 3.0  # pull toward the initial motion in kinematic pre-solves
 FREE_WEIGHT_MIN = 0.05  # B-spline weight of the free control points below which a point counts as held
@@ -131,6 +133,20 @@ def window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
         hi = knots[min(len(knots) - 1, i + 1)] if i + 1 < len(knots) else 1.0
         mask[i] = (lo >= s0 - 1e-9) and (hi <= s1 + 1e-9 or (sp.open_end and lo < s1 - 1e-9))
     return mask
+
+
+def flight_root_weights(sp: Subproblem, s: np.ndarray, w_r: float) -> np.ndarray:
+    """Root residual weight per collocation point (canonical ``s``): W_FLIGHT strictly inside a
+    flight stage of ``sp.flights`` (world s; thesis ch. 3: no contact force there, so a zero
+    root residual leaves gravity alone to move the centre of mass and keeps the angular
+    momentum about it constant), ``w_r`` elsewhere.  A stiff least-squares term rather than
+    an equality: the kernel has no second derivatives for constraint curvature."""
+    w = np.full(len(s), float(w_r))
+    if sp.dynamics == "full":
+        for fa, fb in sp.flights:
+            sa, sb = sp.motion.to_canonical([fa, fb])
+            w[(s > sa + 1e-6) & (s < sb - 1e-6)] = W_FLIGHT
+    return w
 
 
 def _depend_on_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray, other_free: bool) -> np.ndarray:
@@ -357,10 +373,11 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     kern = compiled_kernel(ch).map(N)
     QQ = kern(Q, Qd, Qdd, Fc, TH)  # (35, N)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
+    w_root = flight_root_weights(sp, s, w_r)  # (N,): W_FLIGHT at collocation points in flight
     scale = OBJ_SCALE / mg  # residuals in units of body weight, objective O(1–100)
     wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
     rho_m = SA * QQ[:N_JOINT, :]
-    rho_0 = np.sqrt(w_r) * QQ[N_JOINT:, :]
+    rho_0 = ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1) * QQ[N_JOINT:, :]
     rho_dyn = ca.vec(ca.vertcat(rho_m, rho_0) * ca.repmat(wt, N_DOF, 1)) * scale
     energy = ca.sumsqr(ca.vec(rho_m * ca.repmat(wt, N_JOINT, 1)))  # Σ w T' α Q_m²
     root_energy = ca.sumsqr(ca.vec(QQ[N_JOINT:, :] * ca.repmat(wt, N_ROOT, 1)))
@@ -402,13 +419,6 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         rho_extra.append(np.sqrt(pose.weight) * (q_t - ca.DM(pose.q)))
         if pose.velocity is not None:
             rho_extra.append(0.1 * np.sqrt(pose.weight) * (qd_t - ca.DM(pose.velocity)))
-    # flight stages (thesis ch. 3): no contact, and no root residual either — gravity alone moves
-    # the centre of mass and the angular momentum about it stays constant (in units of m g)
-    for fa, fb in sp.flights:
-        sa, sb = m.to_canonical([fa, fb])
-        ks = np.flatnonzero((s > sa + 1e-6) & (s < sb - 1e-6) & _depend_on_free(K, s, mask, warp_free))
-        if len(ks) and sp.dynamics != "kinematic":
-            add("flight", QQ[N_JOINT:, ks.tolist()] / mg, 0.0, 0.0)
     for a in sp.avoid:
         q_t, _, _ = state_at(a.t)
         i = hk_names.index(a.handle)
@@ -543,7 +553,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             # Hessian).  A free timewarp (and a spring's force, nonlinear in q) also curves z and C:
             # those curvature terms are left out (Gauss–Newton in them).
             if sp.dynamics != "kinematic":
-                C = scale * ca.vertcat(SA, np.sqrt(w_r) * ca.DM.ones(N_ROOT, N)) * ca.repmat(wt, N_DOF, 1)
+                C = scale * ca.vertcat(SA, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
                 Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, N) * C
                 nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
                 Hk = kernel_hessian(ch).map(N)(Q, Qd, Qdd, Fc, TH, Wk)  # (nz, nz N)
