@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "schedules.cli_preview",    # preview, export
     "schedules.cli_audit",      # audit
     "schedules.cli_sweep",      # sweep
+    "schedules.cli_edit",       # edit
 )
 
 
