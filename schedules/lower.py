@@ -169,8 +169,7 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
                     # a dense grid too, as synthesize does for runs — between the 30 Hz points a
                     # toe dipped 11–15 mm (audit gate 10 mm)
-                    # a jump's landing too (scenegraph/leaps.py)
-                    soft_ground_hz=SOFT_PIN_HZ if step.kind == FULL and (step.role == "horizon" or flights) else 0.0)
+                    soft_ground_hz=SOFT_PIN_HZ if step.kind == FULL and step.role == "horizon" else 0.0)
     mask = None if whole else window_mask(sp, m.n_ctrl)
     return sp, mask
 
