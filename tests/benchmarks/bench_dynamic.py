@@ -1,0 +1,82 @@
+"""Dynamic motion (issue 20): jump synthesis times, flight physics, and a momentum edit.
+
+Run:  python tests/benchmarks/bench_dynamic.py [--workdir DIR]
+
+1. ``compose run broad_jump`` and ``compose run twist_jump`` (fresh run folders, no step
+   store), wall time of each (``broad_jump_s``, ``twist_jump_s``); their stages at 120 Hz are
+   measured by :func:`scenegraph.stage_audit.flight.flight_physics` (meshes only):
+   ``parabola_rms_mm`` (the centre of mass against a parabola with g = 9.81) and
+   ``ang_mom_drift`` (largest deviation of the angular momentum about it from its mean, over
+   its magnitude), the worse of the two jumps.
+2. ``hopscotch`` is not bundled yet (``hopscotch_s=nan``).
+3. ``compose edit`` of the CMU 16_05 jump, frames 60:250, landing 0.3 m further: ``edit_s``
+   (the edit itself, clip fitting excluded) and ``edit_momentum_corr`` (the smallest Pearson
+   correlation of the forward/vertical momentum and the main angular momentum with the clip's).
+
+A part that fails prints its figures as nan; the last line is still printed.  Times are
+wall-clock seconds on whatever machine runs it (report the load).  The last line is exactly
+``broad_jump_s=<float> twist_jump_s=<float> hopscotch_s=<float> edit_s=<float> parabola_rms_mm=<float> ang_mom_drift=<float> edit_momentum_corr=<float>``
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+
+def _jump(name: str, work: Path) -> tuple[float, float, float]:
+    from scenegraph.stage_audit import read_stage
+    from scenegraph.stage_audit.flight import flight_physics
+    from schedules.cli import main
+    run = work / f"{name}_run"
+    t0 = time.perf_counter()
+    rc = main(["run", name, "-o", str(work / f"{name}.usda"), "--run-dir", str(run), "--fps", "120",
+               "--report", str(work / f"{name}.json"), "--no-store"])
+    wall = time.perf_counter() - t0
+    if rc != 0:
+        print(f"{name}: exit {rc}", file=sys.stderr)
+    fl = flight_physics(read_stage(work / f"{name}.usda"), "jumper")
+    if not fl:
+        return wall, math.nan, math.nan
+    f = max(fl, key=lambda f: f.stop - f.start)
+    drift = f.ang_mom_drift if f.ang_mom_drift_abs > 0.5 else 0.0  # near zero: within 0.5 kg·m²/s counts as constant
+    return wall, f.parabola_rms_mm, drift
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--workdir", default=None)
+    args = ap.parse_args()
+    work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_dynamic_"))
+    work.mkdir(parents=True, exist_ok=True)
+    res = {}
+    for name in ("broad_jump", "twist_jump"):
+        try:
+            res[name] = _jump(name, work)
+        except Exception as e:  # noqa: BLE001 - the last line is printed whatever fails
+            print(f"{name}: {type(e).__name__}: {e}", file=sys.stderr)
+            res[name] = (math.nan, math.nan, math.nan)
+        print(f"{name}: {res[name][0]:.1f} s, parabola rms {res[name][1]:.3g} mm, ang. momentum drift "
+              f"{res[name][2]:.3g}", flush=True)
+    edit_s = corr = math.nan
+    try:
+        from scenegraph.clip_edit import edit_clip
+        rep = edit_clip(ROOT / "scenarios" / "clips" / "jump_broad_cmu_16_05.bvh", work / "edit.usda",
+                        frames=(60, 250), longer=0.3)
+        edit_s, corr = rep["edit_seconds"], rep["measured"]["momentum_corr"]["min"]
+    except Exception as e:  # noqa: BLE001
+        print(f"edit: {type(e).__name__}: {e}", file=sys.stderr)
+    rms = max(res["broad_jump"][1], res["twist_jump"][1], key=lambda x: math.inf if math.isnan(x) else x)
+    drift = max(res["broad_jump"][2], res["twist_jump"][2], key=lambda x: math.inf if math.isnan(x) else x)
+    print(f"broad_jump_s={res['broad_jump'][0]:.3f} twist_jump_s={res['twist_jump'][0]:.3f} hopscotch_s=nan "
+          f"edit_s={edit_s:.3f} parabola_rms_mm={rms:.4g} ang_mom_drift={drift:.4g} edit_momentum_corr={corr:.4f}")
+
+
+if __name__ == "__main__":
+    main()
