@@ -82,7 +82,7 @@ def test_a_jump_is_a_ground_flight_ground_plan_with_a_ballistic_flight_term():
     plain = transcribe(replace(sp, flights=()), derivatives=False)
     rho0 = np.asarray(plain.rho_dyn_fn(plain.x0, plain.p0)).reshape(-1, 35)
     s = nlp.s_points
-    inside = (s * 2.0 > 0.8 + 1e-6) & (s * 2.0 < 1.28 - 1e-6)
+    inside = (s * 2.0 > 0.8 - 1e-6) & (s * 2.0 < 1.28 + 1e-6)  # the take-off and touch-down points too
     assert inside.sum() >= 12
     live = np.abs(rho0[:, 29:]) > 1e-9
     ratio = np.abs(rho[:, 29:]) / np.maximum(np.abs(rho0[:, 29:]), 1e-12)
@@ -90,6 +90,12 @@ def test_a_jump_is_a_ground_flight_ground_plan_with_a_ballistic_flight_term():
     assert np.allclose(ratio[inside][live[inside]], np.sqrt(W_FLIGHT / W_ROOT), rtol=1e-6)
     assert np.allclose(rho[~inside], rho0[~inside])
     assert flight_root_weights(sp, s, W_ROOT)[inside].min() == W_FLIGHT
+    # no contact force at the take-off and touch-down points; free elsewhere on the ground
+    lam = nlp.x_layout["lambda"]
+    ub = nlp.ubx[lam].reshape(-1, 4)
+    at = np.array([s[k] * 2.0 for _, k, _ in nlp.contact_index])
+    edge = (np.abs(at - 0.8) < 1e-6) | (np.abs(at - 1.28) < 1e-6)
+    assert edge.any() and np.all(ub[edge] == 0.0) and np.all(np.isinf(ub[~edge]))
     # the initial motion is ballistic in flight: pelvis height a parabola with g = 9.81
     t = np.linspace(0.85, 1.23, 20)
     z = st.motion.state_at_s(st.motion.to_canonical(t))[0][:, 2]

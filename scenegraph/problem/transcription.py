@@ -50,11 +50,9 @@ from ..residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compile
                         kernel_hessian, theta_kernel_vector)
 from .subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
+__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
            "FREE_WEIGHT_MIN"]
 
-FLIGHT_HZ = 120.0  # collocation points per second over a flight and FLIGHT_EDGE around it
-FLIGHT_EDGE = 0.05  # s
 W_FLIGHT = 1e6  # root residual weight in flight stages (W_ROOT elsewhere): a jump's flight is ballistic
 OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
 KIN_WEIGHT = 3.0  # pull toward the initial motion in kinematic pre-solves
@@ -145,10 +143,22 @@ def flight_root_weights(sp: Subproblem, s: np.ndarray, w_r: float) -> np.ndarray
     an equality: the kernel has no second derivatives for constraint curvature."""
     w = np.full(len(s), float(w_r))
     if sp.dynamics == "full":
-        for fa, fb in sp.flights:
-            sa, sb = sp.motion.to_canonical([fa, fb])
-            w[(s > sa + 1e-6) & (s < sb - 1e-6)] = W_FLIGHT
+        w[flight_points(sp, s)] = W_FLIGHT
     return w
+
+
+def flight_points(sp: Subproblem, s: np.ndarray) -> np.ndarray:
+    """Which canonical collocation times ``s`` lie in a flight of ``sp.flights``, its ends
+    included: at the take-off and touch-down points the contact force is held at zero as well
+    (``transcribe``), so the spline's acceleration, linear between points, is ballistic on both
+    sides of the flight's first and last intervals — with the ends left out the push-off force
+    leaked into the first 30 ms of flight and the landing force into the last (the stage audit
+    measured up to 1.08 body weights of missing force there)."""
+    out = np.zeros(len(s), bool)
+    for fa, fb in sp.flights:
+        sa, sb = sp.motion.to_canonical([fa, fb])
+        out |= (s > sa - 1e-6) & (s < sb + 1e-6)
+    return out
 
 
 def _depend_on_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray, other_free: bool) -> np.ndarray:
@@ -219,26 +229,7 @@ def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
                 out[-1] = 1.0
                 continue
             out.append(v)
-    return _with_flight_points(sp, np.array(out))
-
-
-def _with_flight_points(sp: Subproblem, grid: np.ndarray) -> np.ndarray:
-    """``grid`` plus points at FLIGHT_HZ over each flight widened by FLIGHT_EDGE (s) at both
-    ends: between 30 Hz points the spline's acceleration is linear, so at 30 Hz the push-off
-    force leaked into the first 30 ms of flight and the landing force into the last (the
-    stage audit measured up to 1.08 body weights there); points closer than a quarter
-    FLIGHT_HZ period to a grid point are dropped."""
-    if not sp.flights or sp.dynamics == "kinematic" or FLIGHT_HZ <= 0:
-        return grid
-    m = sp.motion
-    extra = []
-    for fa, fb in sp.flights:
-        a, b = max(fa - FLIGHT_EDGE, m.start), min(fb + FLIGHT_EDGE, m.end)
-        extra += list(np.linspace(a, b, max(2, int(round((b - a) * FLIGHT_HZ)) + 1)))
-    e = np.asarray(m.to_canonical(extra), float)
-    d = 0.25 / (FLIGHT_HZ * m.duration)
-    e = e[[not np.any(np.abs(grid - v) < d) for v in e]]
-    return np.unique(np.r_[grid, e])
+    return np.array(out)
 
 
 def _touches_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -525,6 +516,11 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     ctrl0 = np.asarray(m.ctrl, float)
     lbx = [np.tile(lo, K)[free_idx], np.full(xW.shape[0], -np.inf), [], np.zeros(n_lam)]
     ubx = [np.tile(hi, K)[free_idx], np.full(xW.shape[0], np.inf), [], np.full(n_lam, np.inf)]
+    if n_lam and sp.flights:  # no contact force at a flight's take-off and touch-down points
+        edge = flight_points(sp, s)
+        for c, (_, k, _, _) in enumerate(planted):
+            if edge[k]:
+                ubx[3][4 * c:4 * c + 4] = 0.0
     x0 = [ctrl0.ravel()[free_idx], np.asarray(m.warp, float) if warp_free else [], [],
           _lambda_guess(sp, planted if n_lam else [], s, mg)]
     fp0 = []
