@@ -496,7 +496,11 @@ class _LeapGoal(_Model):
                                                                         "and landing (m): the feet pass above it")
     tolerance: Num = Field(0.05, gt=0.0, le=10.0, description="allowed landing distance from the position (m)")
 
-    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT  # obstacle springs (scenarios/weights.py)
+    @property
+    def plan_weight(self) -> float | None:
+        """The obstacle springs' weight (scenarios/weights.py); None without an obstacle (no
+        goal term: the leap acts through its footprints and its flight term)."""
+        return TARGET_WEIGHT if self.obstacle_height is not None else None
 
     @model_validator(mode="after")
     def _landing_place(self):
