@@ -50,6 +50,7 @@ __all__ = [
     "Scenario", "CharacterSpec", "BodySpec", "ExtraMass", "LockedJoint", "RangeOfMotion", "StartSpec",
     "Environment", "Ground", "Slope", "Region",
     "Goal", "FootprintsGoal", "Footprint", "WalkToGoal", "ReachGoal", "TackleGoal", "AvoidGoal", "StyleChangeGoal",
+    "JumpGoal", "HopGoal", "KeyframesGoal", "LeapEnd", "Keyframe", "leap_sequence",
     "Coupling", "HandHold", "Carry", "HandleRef", "ScheduleSpec", "SCHEDULE_KINDS",
     "FieldProblem", "BODY_PRESETS", "HANDLE_NAMES", "JOINT_DOF_NAMES", "JOINT_NAMES", "ADVERSARIAL_GOALS",
     "joint_dofs", "is_style_path", "suggest",
@@ -446,7 +447,173 @@ class StyleChangeGoal(_Model):
         return False
 
 
-Goal = Annotated[Union[FootprintsGoal, WalkToGoal, ReachGoal, TackleGoal, AvoidGoal, StyleChangeGoal],
+# --- dynamic motion (issue 20): jumps, hops, a rough keyframe sketch -------------------------
+
+G_ACC = 9.81  # m/s², the plan's nominal flight time of a jump with free timing
+LEAP_TAKEOFF_DEFAULT = 0.7  # s: take-off of a first leap without a time (a countermovement from standing)
+LEAP_FLIGHT_RANGE = (0.25, 0.8)  # s: nominal flight times are clipped to this
+
+
+class LeapEnd(_Model):
+    """Where (and optionally when) a jump or hop leaves or meets the ground."""
+
+    position: Point2 | None = Field(None, description="[x, y] (m): the midpoint of the feet (a hop: the foot's "
+                                                      "heel-ball midpoint); default for a take-off: where the "
+                                                      "character stands")
+    region: Region | None = Field(None, description="instead of position: the feet land (or take off) anywhere "
+                                                    "in this rectangle; the optimisation places them")
+    time: Seconds | None = Field(None, description="when (s): the last moment on the ground (take-off) or the "
+                                                   "first (landing); default free: a nominal time from the "
+                                                   "distance, which the timing step may move")
+
+    @model_validator(mode="after")
+    def _one_place(self):
+        if self.position is not None and self.region is not None:
+            raise FieldProblem(("region",), "give position or region, not both")
+        return self
+
+    def centre(self) -> tuple[float, float] | None:
+        """The position, or the region's centre (m); None when neither is given."""
+        if self.position is not None:
+            return (float(self.position[0]), float(self.position[1]))
+        if self.region is not None:
+            return ((self.region.min[0] + self.region.max[0]) / 2, (self.region.min[1] + self.region.max[1]) / 2)
+        return None
+
+
+class _LeapGoal(_Model):
+    """Fields and plan facts shared by jump and hop (a ground stage, a flight stage, a ground stage)."""
+
+    name: Name | None = None
+    character: str = Field(description="character name")
+    takeoff: LeapEnd = Field(default_factory=LeapEnd, description="take-off: position/region and time; "
+                                                                  "default: from where the character stands")
+    landing: LeapEnd = Field(description="landing: position or region (required), time (optional)")
+    turn_deg: Degrees = Field(0.0, ge=-720.0, le=720.0, description="turn in the air (deg, counter-clockwise "
+                                                                  "seen from above): the landing feet face this "
+                                                                  "much further round than the take-off feet")
+    obstacle_height: Num | None = Field(None, gt=0.0, le=1.2, description="an obstacle midway between take-off "
+                                                                        "and landing (m): the feet pass above it")
+    tolerance: Num = Field(0.05, gt=0.0, le=10.0, description="allowed landing distance from the position (m)")
+
+    @property
+    def plan_weight(self) -> float | None:
+        """The obstacle springs' weight (scenarios/weights.py); None without an obstacle (no
+        goal term: the leap acts through its footprints and its flight term)."""
+        return TARGET_WEIGHT if self.obstacle_height is not None else None
+
+    @model_validator(mode="after")
+    def _landing_place(self):
+        if self.landing.centre() is None:
+            raise FieldProblem(("landing",), "a landing needs a position or a region")
+        t0, t1 = self.takeoff.time, self.landing.time
+        if t0 is not None and t1 is not None and t1 <= t0 + 1e-9:
+            raise FieldProblem(("landing", "time"), f"landing at {t1} s must come after the take-off at {t0} s")
+        return self
+
+    def flight_time(self, start: tuple[float, float]) -> float:
+        """Nominal flight (s): the times given, else √(2 d / g) (the range of a 45° launch over
+        d m from ``start`` or the take-off), clipped to LEAP_FLIGHT_RANGE, and at least the
+        time to rise over the obstacle and back (2 √(2 h / g))."""
+        if self.takeoff.time is not None and self.landing.time is not None:
+            return float(self.landing.time - self.takeoff.time)
+        a = self.takeoff.centre() or start
+        b = self.landing.centre()
+        d = ((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2) ** 0.5
+        t = min(max((2 * d / G_ACC) ** 0.5, LEAP_FLIGHT_RANGE[0]), LEAP_FLIGHT_RANGE[1])
+        if self.obstacle_height is not None:
+            t = max(t, 2 * (2 * self.obstacle_height / G_ACC) ** 0.5)
+        return t
+
+    def times(self, start: tuple[float, float] = (0.0, 0.0), after: float = 0.0) -> tuple[float, float]:
+        """(take-off, landing) s: the given times, else a take-off LEAP_TAKEOFF_DEFAULT after
+        ``after`` (the previous landing, or 0) and the nominal flight."""
+        tf = self.flight_time(start)
+        t0 = self.takeoff.time
+        if t0 is None:
+            t0 = self.landing.time - tf if self.landing.time is not None else after + LEAP_TAKEOFF_DEFAULT
+        return float(t0), float(t0 + tf)
+
+    def active(self, window: tuple[float, float]) -> bool:
+        """The flight meets the window (canonical s; nominal times when free)."""
+        return _meets(self.times(), window)
+
+
+class JumpGoal(_LeapGoal):
+    """A two-footed jump: both feet leave the ground together and land together (a broad jump, a twist jump)."""
+
+    type: Literal["jump"]
+
+
+class HopGoal(_LeapGoal):
+    """A hop: one foot takes off and the same foot lands."""
+
+    type: Literal["hop"]
+    foot: Literal["l", "r"] = Field(description="the foot that takes off and lands")
+
+
+class Keyframe(_Model):
+    """One key of a rough sketch: the pelvis position, the heading and some joint angles at a time."""
+
+    time: Seconds = Field(description="when (s)")
+    position: Point3 | None = Field(None, description="pelvis [x, y, z] (m)")
+    heading: Degrees | None = Field(None, ge=-720.0, le=720.0, description="pelvis heading (deg, from +X)")
+    joints: dict[str, Degrees] = Field(default_factory=dict, max_length=29,
+                                       description="joint DOF angles (deg), e.g. {knee_flex_l: 60}")
+    weight: Num = Field(1.0, gt=0.0, le=1000.0, description="multiplies the sketch's spring weight")
+
+    @field_validator("joints")
+    @classmethod
+    def _dofs(cls, v):
+        for k in v:
+            if k not in JOINT_DOF_NAMES:
+                raise ValueError(suggest(k, JOINT_DOF_NAMES, "joint DOF"))
+        return v
+
+    @model_validator(mode="after")
+    def _something(self):
+        if self.position is None and self.heading is None and not self.joints:
+            raise FieldProblem(("time",), "a key needs a position, a heading or joints")
+        return self
+
+
+LEAP_TAKEOFF_SLACK = 0.3  # m: a given take-off position lies this close to where the character stands
+
+
+def leap_sequence(c, leaps: list) -> list:
+    """[((j, goal), (take-off s, landing s), where the character stands before it [x, y] m)] of
+    one character's jumps and hops ``leaps`` = [(j, goal)], in time order (nominal times
+    for free timing; each free take-off LEAP_TAKEOFF_DEFAULT after the previous landing)."""
+    here = (float(c.start.position[0]), float(c.start.position[1]))
+    after, out = 0.0, []
+    given = sorted(leaps, key=lambda jg: (jg[1].takeoff.time if jg[1].takeoff.time is not None else
+                                          jg[1].landing.time if jg[1].landing.time is not None else float("inf"),
+                                          jg[0]))
+    for j, g in given:
+        t = g.times(here, after)
+        out.append(((j, g), t, here))
+        here, after = g.landing.centre(), t[1]
+    return out
+
+
+class KeyframesGoal(_Model):
+    """A rough animation: soft springs toward a few keys (thesis ch. 3's sketch)."""
+
+    type: Literal["keyframes"]
+    name: Name | None = None
+    character: str = Field(description="character name")
+    keys: list[Keyframe] = Field(min_length=1, max_length=200, description="the keys, in any order")
+    tolerance: Num = Field(0.1, gt=0.0, le=10.0, description="report bound: largest pelvis distance from a "
+                                                            "key's position (m)")
+
+    plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
+
+    def active(self, window: tuple[float, float]) -> bool:
+        return any(_meets((k.time, k.time), window) for k in self.keys)
+
+
+Goal = Annotated[Union[FootprintsGoal, WalkToGoal, ReachGoal, TackleGoal, AvoidGoal, StyleChangeGoal, JumpGoal,
+                       HopGoal, KeyframesGoal],
                  Field(discriminator="type")]
 
 # --- couplings ------------------------------------------------------------------------------
@@ -523,6 +690,11 @@ def _goal_refs(g) -> list[tuple[str, str]]:
 
 
 def _goal_times(g) -> list[tuple[tuple, float]]:
+    if isinstance(g, (JumpGoal, HopGoal)):
+        return [((end, "time"), t) for end, t in (("takeoff", g.takeoff.time), ("landing", g.landing.time))
+                if t is not None]
+    if isinstance(g, KeyframesGoal):
+        return [(("keys", i, "time"), k.time) for i, k in enumerate(g.keys)]
     if isinstance(g, FootprintsGoal):
         out = []
         for i, fp in enumerate(g.steps):
@@ -688,6 +860,40 @@ class Scenario(_Model):
                                 f"apart: meeting at {g.time:g} s needs {gap / max(g.time, 1e-9):.3g} m/s of closing "
                                 f"speed, above two sprinters' {2 * MAX_SPEED:g} m/s; make the time later"))
         out += self._footprint_problems()
+        out += self._leap_problems(names)
+        return out
+
+    def _leap_problems(self, names: dict[str, int]) -> list[tuple[tuple, str]]:
+        """Jumps and hops of a character form one sequence from where it stands: no footprints
+        or walk_to besides them (not composable yet), a take-off within LEAP_TAKEOFF_SLACK of
+        where it stands, the sequence in time order without overlap, inside the scenario."""
+        out: list[tuple[tuple, str]] = []
+        for c in self.characters:
+            leaps = [(j, g) for j, g in enumerate(self.goals) if isinstance(g, (JumpGoal, HopGoal))
+                     and g.character == c.name]
+            if not leaps:
+                continue
+            other = next((j for j, g in enumerate(self.goals) if isinstance(g, (FootprintsGoal, WalkToGoal))
+                          and g.character == c.name), None)
+            if other is not None:
+                out.append((("goals", other, "type"), f"{c.name} jumps or hops (goals[{leaps[0][0]}]); footprints and "
+                            "walk_to cannot be combined with jump/hop goals of the same character yet "
+                            "(docs/dynamic-motion.md)"))
+                continue
+            for (j, g), (t0, t1), here in leap_sequence(c, leaps):
+                if g.takeoff.position is not None:
+                    d = ((g.takeoff.position[0] - here[0]) ** 2 + (g.takeoff.position[1] - here[1]) ** 2) ** 0.5
+                    if d > LEAP_TAKEOFF_SLACK:
+                        out.append((("goals", j, "takeoff", "position"),
+                                    f"take-off {list(g.takeoff.position)} is {d:.3g} m from where {c.name} stands "
+                                    f"then ({here[0]:.3g}, {here[1]:.3g}); a leap starts where the character "
+                                    f"stands (within {LEAP_TAKEOFF_SLACK:g} m)"))
+                if t1 > self.duration + 1e-9:
+                    out.append((("goals", j, "landing"), f"the landing at {t1:.3g} s is after the end of the "
+                                f"scenario ({self.duration:g} s)"))
+                if t0 < 0.3 - 1e-9:
+                    out.append((("goals", j, "takeoff"), f"take-off at {t0:.3g} s leaves under 0.3 s on the ground "
+                                "to push off"))
         return out
 
     def _stature(self, c: "CharacterSpec") -> float:

@@ -44,6 +44,7 @@ class PoseTarget:
     q: tuple[float, ...]
     weight: float = 1.0
     velocity: tuple[float, ...] | None = None
+    dofs: tuple[int, ...] | None = None  # only these DOF indices (None: all 35)
 
 
 @dataclass(frozen=True)
@@ -91,6 +92,7 @@ class Subproblem:
     style: Style
     motion: Motion
     footsteps: tuple[Footstep, ...] = ()
+    flights: tuple[tuple[float, float], ...] = ()  # world s (take-off, landing): zero root residual inside
     window: tuple[float, float] | None = None
     free: frozenset = frozenset({"q", "warp"})
     dynamics: str = "full"

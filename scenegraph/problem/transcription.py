@@ -50,8 +50,10 @@ from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, 
                         kernel_hessian, theta_kernel_vector)
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["NLP", "transcribe", "window_mask", "OBJ_SCALE", "KIN_WEIGHT", "FREE_WEIGHT_MIN"]
+__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
+           "FREE_WEIGHT_MIN"]
 
+W_FLIGHT = 1e6  # root residual weight in flight stages (W_ROOT elsewhere): a jump's flight is ballistic
 OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
 KIN_WEIGHT = 3.0  # pull toward the initial motion in kinematic pre-solves
 FREE_WEIGHT_MIN = 0.05  # B-spline weight of the free control points below which a point counts as held
@@ -131,6 +133,32 @@ def window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
         hi = knots[min(len(knots) - 1, i + 1)] if i + 1 < len(knots) else 1.0
         mask[i] = (lo >= s0 - 1e-9) and (hi <= s1 + 1e-9 or (sp.open_end and lo < s1 - 1e-9))
     return mask
+
+
+def flight_root_weights(sp: Subproblem, s: np.ndarray, w_r: float) -> np.ndarray:
+    """Root residual weight per collocation point (canonical ``s``): W_FLIGHT strictly inside a
+    flight stage of ``sp.flights`` (world s; thesis ch. 3: no contact force there, so a zero
+    root residual leaves gravity alone to move the centre of mass and keeps the angular
+    momentum about it constant), ``w_r`` elsewhere.  A stiff least-squares term rather than
+    an equality: the kernel has no second derivatives for constraint curvature."""
+    w = np.full(len(s), float(w_r))
+    if sp.dynamics == "full":
+        w[flight_points(sp, s)] = W_FLIGHT
+    return w
+
+
+def flight_points(sp: Subproblem, s: np.ndarray) -> np.ndarray:
+    """Which canonical collocation times ``s`` lie in a flight of ``sp.flights``, its ends
+    included: at the take-off and touch-down points the contact force is held at zero as well
+    (``transcribe``), so the spline's acceleration, linear between points, is ballistic on both
+    sides of the flight's first and last intervals — with the ends left out the push-off force
+    leaked into the first 30 ms of flight and the landing force into the last (the stage audit
+    measured up to 1.08 body weights of missing force there)."""
+    out = np.zeros(len(s), bool)
+    for fa, fb in sp.flights:
+        sa, sb = sp.motion.to_canonical([fa, fb])
+        out |= (s > sa - 1e-6) & (s < sb + 1e-6)
+    return out
 
 
 def _depend_on_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray, other_free: bool) -> np.ndarray:
@@ -357,10 +385,11 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     kern = compiled_kernel(ch).map(N)
     QQ = kern(Q, Qd, Qdd, Fc, TH)  # (35, N)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
+    w_root = flight_root_weights(sp, s, w_r)  # (N,): W_FLIGHT at collocation points in flight
     scale = OBJ_SCALE / mg  # residuals in units of body weight, objective O(1–100)
     wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
     rho_m = SA * QQ[:N_JOINT, :]
-    rho_0 = np.sqrt(w_r) * QQ[N_JOINT:, :]
+    rho_0 = ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1) * QQ[N_JOINT:, :]
     rho_dyn = ca.vec(ca.vertcat(rho_m, rho_0) * ca.repmat(wt, N_DOF, 1)) * scale
     energy = ca.sumsqr(ca.vec(rho_m * ca.repmat(wt, N_JOINT, 1)))  # Σ w T' α Q_m²
     root_energy = ca.sumsqr(ca.vec(QQ[N_JOINT:, :] * ca.repmat(wt, N_ROOT, 1)))
@@ -396,6 +425,9 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             rho_extra.append(np.sqrt(targ.weight) * d)
     for pose in sp.poses:
         q_t, qd_t, _ = state_at(pose.t)
+        if pose.dofs is not None:  # a partial pose (a keyframe's heading and joint angles)
+            rho_extra.append(np.sqrt(pose.weight) * (q_t[list(pose.dofs)] - ca.DM(pose.q)[list(pose.dofs)]))
+            continue
         rho_extra.append(np.sqrt(pose.weight) * (q_t - ca.DM(pose.q)))
         if pose.velocity is not None:
             rho_extra.append(0.1 * np.sqrt(pose.weight) * (qd_t - ca.DM(pose.velocity)))
@@ -484,6 +516,11 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     ctrl0 = np.asarray(m.ctrl, float)
     lbx = [np.tile(lo, K)[free_idx], np.full(xW.shape[0], -np.inf), [], np.zeros(n_lam)]
     ubx = [np.tile(hi, K)[free_idx], np.full(xW.shape[0], np.inf), [], np.full(n_lam, np.inf)]
+    if n_lam and sp.flights:  # no contact force at a flight's take-off and touch-down points
+        edge = flight_points(sp, s)
+        for c, (_, k, _, _) in enumerate(planted):
+            if edge[k]:
+                ubx[3][4 * c:4 * c + 4] = 0.0
     x0 = [ctrl0.ravel()[free_idx], np.asarray(m.warp, float) if warp_free else [], [],
           _lambda_guess(sp, planted if n_lam else [], s, mg)]
     fp0 = []
@@ -491,6 +528,10 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         fp0 += list(sp.footsteps[si].position)
     lbx[2] = np.asarray(fp0) - 0.5
     ubx[2] = np.asarray(fp0) + 0.5
+    for j, si in enumerate(free_steps):  # a footstep with bounds (a jump's landing region) keeps in them
+        b = sp.footsteps[si].bounds
+        if b is not None:
+            lbx[2][2 * j:2 * j + 2], ubx[2][2 * j:2 * j + 2] = b[0], b[1]
     x0[2] = np.asarray(fp0)
 
     x = ca.vertcat(xP, xW, xF, xL)
@@ -529,7 +570,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             # Hessian).  A free timewarp (and a spring's force, nonlinear in q) also curves z and C:
             # those curvature terms are left out (Gauss–Newton in them).
             if sp.dynamics != "kinematic":
-                C = scale * ca.vertcat(SA, np.sqrt(w_r) * ca.DM.ones(N_ROOT, N)) * ca.repmat(wt, N_DOF, 1)
+                C = scale * ca.vertcat(SA, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
                 Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, N) * C
                 nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
                 Hk = kernel_hessian(ch).map(N)(Q, Qd, Qdd, Fc, TH, Wk)  # (nz, nz N)

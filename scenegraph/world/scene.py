@@ -264,8 +264,8 @@ def build_scene(scn: Scenario) -> Scene:
         plan = plan_footsteps(goals, ctx)
         steps = plan.steps
         run_from = change[0] if change is not None and change[2] == "run" else plan.run
-        motion = initial_motion(ch, steps, 0.0, T, ground=ground, run=run_from,
-                                example=_example(scn, spec, styles))
+        motion = plan.initial(ch) if plan.initial is not None else \
+            initial_motion(ch, steps, 0.0, T, ground=ground, run=run_from, example=_example(scn, spec, styles))
         chars.append(CharacterState(spec.name, ch, tuple(styles), steps, motion, start))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     bounds = None

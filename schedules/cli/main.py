@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "schedules.cli.preview",    # preview, export
     "schedules.cli.audit",      # audit
     "schedules.cli.sweep",      # sweep
+    "schedules.cli.edit",       # edit
 )
 
 

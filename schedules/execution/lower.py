@@ -31,7 +31,7 @@ import numpy as np
 from scenarios.errors import ComposeError
 from scenegraph.problem.joint import JointCoupling, coupling_times
 from scenegraph.model.motion import Motion
-from scenegraph.problem import HandleTarget, Subproblem, window_mask
+from scenegraph.problem import HandleTarget, PoseTarget, Subproblem, window_mask
 from scenegraph.world.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.model.style import Style
 
@@ -53,7 +53,7 @@ HANDLED = ({("kind", k) for k in (FULL, "timing")} | {("role", r) for r in ROLES
            | {("term", t) for t in ("energy=number", "dynamics=hard", "dynamics=relaxed", "environment=hard",
                                     "start=number", "boundary:start=hard", "boundary:end=hard",
                                     "boundary:end=free", "goal=number", "goal=hard", "coupling=number",
-                                    "coupling=hard")})
+                                    "coupling=hard", "flight=hard")})
 
 
 def check_step(step: Step) -> None:
@@ -137,6 +137,10 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
         steps = tuple(f if (whole or (f.t0 >= win[0] - 1e-6 and f.t1 <= win[1] + 1e-6)) else replace(f, free=False)
                       for f in steps)
     targets, avoid = goal_targets(scene, who, _goal_weights(step), window=win)  # window: reaction time
+    poses = tuple(t for t in targets if isinstance(t, PoseTarget))  # keyframes: partial pose springs
+    targets = tuple(t for t in targets if not isinstance(t, PoseTarget))
+    flights = tuple(scene.goal(n.split(":", 1)[1]).flight for n, v in step.terms
+                    if n.startswith("flight:") and v == HARD and scene.goal(n.split(":", 1)[1]).character == who)
     springs = ()
     for cname in step.couplings:
         w = step.term(f"coupling:{cname}")
@@ -153,7 +157,8 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
     style_end = style_at(scene, who, step, step.window[1])
     if style_end is style:
         style_end = None
-    sp = Subproblem(st.character, style, m, steps, window=None if whole else win, free=frozenset(free),
+    sp = Subproblem(st.character, style, m, steps, flights=flights, poses=poses,
+                    window=None if whole else win, free=frozenset(free),
                     dynamics="full" if step.term("dynamics") == HARD else "relaxed", targets=targets, avoid=avoid,
                     springs=springs, style_end=style_end,
                     max_iter=iteration_cap(step) if max_iter is None else max_iter,

@@ -51,7 +51,8 @@ from dataclasses import dataclass, field
 import networkx as nx
 
 from scenarios.errors import InputError
-from scenarios.schema import FootprintsGoal, HandHold, Scenario, ScheduleSpec, StyleChangeGoal, TackleGoal
+from scenarios.schema import (FootprintsGoal, HandHold, HopGoal, JumpGoal, Scenario, ScheduleSpec, StyleChangeGoal,
+                              TackleGoal)
 from scenarios.weights import START_WEIGHT
 
 from schedules.plan.step import (COUPLED, DECREASING_HORIZON, FREE, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
@@ -257,7 +258,10 @@ def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ..
     for ch in b.characters:
         for gname, goal in st.goals_of[ch]:
             if goal.active(w):  # the goal kind's plan facts (scenarios/schema.py)
-                goals[f"goal:{gname}"] = goal.plan_weight
+                if goal.plan_weight is not None:  # None: no solver term (a leap without an obstacle)
+                    goals[f"goal:{gname}"] = goal.plan_weight
+                if isinstance(goal, (JumpGoal, HopGoal)):  # its flight stage is ballistic
+                    goals[f"flight:{gname}"] = HARD
         for cname, c, members in st.couplings_of[ch]:
             if not _interval_meets(c.interval, w):
                 continue

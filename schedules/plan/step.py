@@ -69,6 +69,7 @@ TERMS: dict[str, tuple[str, ...]] = {  # exact term names -> the values they may
 TERM_PREFIXES: dict[str, tuple[str, ...]] = {  # "goal:<name>", "coupling:<name>" -> values
     "goal": (NUMBER, HARD),
     "coupling": (NUMBER, HARD),
+    "flight": (HARD,),  # a jump's or hop's flight stage: zero root residual (scenegraph/model/leaps.py)
 }
 ROLES = ("whole", "window", "seam", "horizon", "receding")
 

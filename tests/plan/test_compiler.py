@@ -53,6 +53,9 @@ KINDS = [
     ("downhill", {TIMEWARP}, 1),
     ("turn180", {TIMEWARP}, 1),
     ("springy_run", {TIMEWARP}, 1),
+    # jumps: take-off and landing times given, no timing step (schedule.timewarp: false)
+    ("broad_jump", set(), 1),
+    ("twist_jump", set(), 1),
 ]
 
 

@@ -242,11 +242,11 @@ def test_file_and_version_helpers_are_leaves():
 
 
 # the pipeline's layers, in order (docs/architecture.md): a module may import its own layer
-# and the layers before it.  ``scenegraph.stage_audit`` reads stages only (rule 9), so it sits
-# with the output; the plan needs only the language, so it comes before nothing of scenegraph
-# at all, but placing it after export keeps one line.
+# and the layers before it.  ``scenegraph.stage_audit`` reads stages only (rule 9): it comes
+# before the output that measures its own stages (``export.clip_edit``); the plan needs only
+# the language, so it could come earlier, but placing it after scenegraph keeps one line.
 LAYERS = ("scenarios", "scenegraph.model", "scenegraph.problem", "scenegraph.world", "scenegraph.mocap",
-          "scenegraph.nio", "scenegraph.export", "scenegraph.stage_audit", "schedules.plan",
+          "scenegraph.nio", "scenegraph.stage_audit", "scenegraph.export", "schedules.plan",
           "schedules.execution", "schedules.cli")
 # package __init__ files above the layers: what they may re-export
 ROOT_PACKAGES = {"scenegraph": "scenegraph.model", "schedules": "schedules.plan"}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from scenarios.loader import parse_scenario
-from scenegraph.world.footplan import RANK_CHASE, RANK_FOOTPRINTS, RANK_WALK, RANK_WALK_AHEAD
+from scenegraph.world.footplan import RANK_CHASE, RANK_FOOTPRINTS, RANK_LEAP, RANK_WALK, RANK_WALK_AHEAD
 from scenegraph.world.scene import build_scene
 
 CAST = """name: plan
@@ -69,7 +69,7 @@ def test_ranks_order_the_kinds():
     assert ranks[("walk_to", "a")] == RANK_WALK and ranks[("walk_to", "b")] is None
     assert ranks[("tackle", "a")] == RANK_CHASE and ranks[("tackle", "b")] == RANK_WALK_AHEAD
     assert ranks[("avoid", "b")] == RANK_WALK_AHEAD and ranks[("avoid", "a")] is None
-    assert RANK_FOOTPRINTS < RANK_WALK < RANK_CHASE < RANK_WALK_AHEAD
+    assert RANK_FOOTPRINTS < RANK_LEAP < RANK_WALK < RANK_CHASE < RANK_WALK_AHEAD
 
 
 def test_a_gait_change_reshapes_the_walk():

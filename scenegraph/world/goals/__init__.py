@@ -13,16 +13,19 @@ from scenegraph.world.goals.avoid import Avoid
 from scenegraph.world.goals.base import GoalRecord, violated_by, where_of
 from scenegraph.world.goals.couplings import COUPLING_KINDS, Carry, Coupling, HandHold
 from scenegraph.world.goals.footprints import Footprints
+from scenegraph.world.goals.jump import Hop, Jump
+from scenegraph.world.goals.keyframes import Keyframes
 from scenegraph.world.goals.reach import Reach
 from scenegraph.world.goals.style_change import StyleChange
 from scenegraph.world.goals.tackle import Tackle
 from scenegraph.world.goals.walk_to import WalkTo
 
 __all__ = ["GOAL_KINDS", "COUPLING_KINDS", "GoalRecord", "Coupling", "WalkTo", "Reach", "Tackle", "Avoid",
-           "Footprints", "StyleChange", "HandHold", "Carry", "goal_records", "coupling_records", "where_of",
+           "Footprints", "StyleChange", "Jump", "Hop", "Keyframes", "HandHold", "Carry", "goal_records", "coupling_records", "where_of",
            "violated_by"]
 
-GOAL_KINDS: dict[str, type[GoalRecord]] = {k.kind: k for k in (Footprints, WalkTo, Reach, Tackle, Avoid, StyleChange)}
+GOAL_KINDS: dict[str, type[GoalRecord]] = {k.kind: k for k in (Footprints, WalkTo, Reach, Tackle, Avoid, StyleChange,
+                                                          Jump, Hop, Keyframes)}
 
 
 def goal_records(scn, plans_last: dict[frozenset, str]) -> tuple[GoalRecord, ...]:

@@ -1,0 +1,149 @@
+"""The dynamic-motion language (issue 20): ``jump``, ``hop`` and ``keyframes`` goals.
+
+Validation with located errors, and every field's effect on what is solved: the stages
+(footsteps and flights), the flight term of the Step and the zero root residual it becomes
+in the transcription, the landing heading of ``turn_deg``, the bounded free footprints of a
+region, the obstacle springs and the keyframe springs.  No IPOPT (fast).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from scenarios.errors import InputError
+from scenarios.loader import load_scenario, parse_scenario
+from scenegraph.problem import PoseTarget, transcribe
+from scenegraph.problem.transcription import W_FLIGHT, flight_root_weights
+from scenegraph.model.residual import W_ROOT
+from scenegraph.world.scene import build_scene
+from schedules.plan.compiler import compile_schedule
+from schedules.execution.lower import lower
+
+HEAD = """name: j
+duration: 2.0
+characters:
+  - name: a
+    start: {position: [0.0, 0.0], heading: 0}
+goals:
+"""
+
+
+def _scn(goals: str, head: str = HEAD):
+    return parse_scenario(head + goals, "j.yaml")
+
+
+def _bad(goals: str, field: str, words: str):
+    with pytest.raises(InputError) as e:
+        _scn(goals)
+    msg = str(e.value)
+    assert f"j.yaml:" in msg and field in msg and words in msg, msg
+
+
+JUMP = """  - type: jump
+    character: a
+    takeoff: {time: 0.8}
+    landing: {position: [1.2, 0.0], time: 1.28}
+"""
+
+
+def test_bad_jumps_are_rejected_at_their_field():
+    _bad("  - {type: jump, character: a, landing: {time: 1.0}}\n", "goals[0].landing", "position or a region")
+    _bad("  - {type: jump, character: a, takeoff: {time: 1.0}, landing: {position: [1, 0], time: 0.9}}\n",
+         "goals[0].landing.time", "after the take-off")
+    _bad("  - {type: jump, character: a, takeoff: {position: [2, 0]}, landing: {position: [3, 0]}}\n",
+         "goals[0].takeoff.position", "where the character stands")
+    _bad("  - {type: jump, character: a, landing: {position: [1, 0], time: 2.5}}\n", "goals[0].landing", "")
+    _bad("  - {type: jump, character: a, landing: {position: [1, 0], region: {min: [0, 0], max: [1, 1]}}}\n",
+         "goals[0].landing.region", "not both")
+    _bad("  - {type: hop, character: a, landing: {position: [1, 0]}}\n", "goals[0].foot", "")
+    _bad(JUMP + "  - {type: walk_to, character: a, target: [1, 1], time: 1.9}\n", "goals[1].type", "cannot be combined")
+    _bad("  - {type: keyframes, character: a, keys: [{time: 0.5, joints: {knee_flx_l: 40}}]}\n",
+         "goals[0].keys[0].joints", "knee_flex_l")
+    _bad("  - {type: keyframes, character: a, keys: [{time: 0.5}]}\n", "goals[0].keys[0].time", "position, a heading")
+
+
+def test_a_jump_is_a_ground_flight_ground_plan_with_a_ballistic_flight_term():
+    scn = _scn(JUMP)
+    scene = build_scene(scn)
+    st = scene.character("a")
+    on = lambda t: [f.foot for f in st.footsteps if f.t0 <= t <= f.t1]  # noqa: E731
+    assert on(0.5) == ["l", "r"] and on(1.0) == [] and sorted(on(1.5)) == ["l", "r"]
+    sched = compile_schedule(scn)
+    full = [s for s in sched.order() if s.kind == "full"][0]
+    assert full.term("flight:jump_0") == "hard"
+    sp, _ = lower(scene, full, "a")
+    assert sp.flights == ((0.8, 1.28),)
+    # the flight term makes the root residual stiff (W_FLIGHT) at the collocation points in flight
+    nlp = transcribe(sp, derivatives=False)
+    rho = np.asarray(nlp.rho_dyn_fn(nlp.x0, nlp.p0)).reshape(-1, 35)  # (N, 35): per point, root last 6
+    plain = transcribe(replace(sp, flights=()), derivatives=False)
+    rho0 = np.asarray(plain.rho_dyn_fn(plain.x0, plain.p0)).reshape(-1, 35)
+    s = nlp.s_points
+    inside = (s * 2.0 > 0.8 - 1e-6) & (s * 2.0 < 1.28 + 1e-6)  # the take-off and touch-down points too
+    assert inside.sum() >= 12
+    live = np.abs(rho0[:, 29:]) > 1e-9
+    ratio = np.abs(rho[:, 29:]) / np.maximum(np.abs(rho0[:, 29:]), 1e-12)
+    assert live[inside].sum() > 12
+    assert np.allclose(ratio[inside][live[inside]], np.sqrt(W_FLIGHT / W_ROOT), rtol=1e-6)
+    assert np.allclose(rho[~inside], rho0[~inside])
+    assert flight_root_weights(sp, s, W_ROOT)[inside].min() == W_FLIGHT
+    # no contact force at the take-off and touch-down points; free elsewhere on the ground
+    lam = nlp.x_layout["lambda"]
+    ub = nlp.ubx[lam].reshape(-1, 4)
+    at = np.array([s[k] * 2.0 for _, k, _ in nlp.contact_index])
+    edge = (np.abs(at - 0.8) < 1e-6) | (np.abs(at - 1.28) < 1e-6)
+    assert edge.any() and np.all(ub[edge] == 0.0) and np.all(np.isinf(ub[~edge]))
+    # the initial motion is ballistic in flight: pelvis height a parabola with g = 9.81
+    t = np.linspace(0.85, 1.23, 20)
+    z = st.motion.state_at_s(st.motion.to_canonical(t))[0][:, 2]
+    a = np.polyfit(t, z, 2)[0]
+    assert abs(-2 * a - 9.81) < 0.5
+
+
+def test_turn_free_timing_region_hop_obstacle_and_keyframes_change_what_is_solved():
+    base = build_scene(_scn(JUMP)).character("a").footsteps
+    turned = build_scene(_scn(JUMP + "    turn_deg: 90\n")).character("a").footsteps
+    assert [f.heading for f in base if f.t0 > 1] == [0.0, 0.0]
+    assert [round(f.heading, 6) for f in turned if f.t0 > 1] == [round(math.pi / 2, 6)] * 2
+    # free timing: nominal flight from the distance (√(2 d / g)), take-off 0.7 s after the start
+    free = build_scene(_scn("  - {type: jump, character: a, landing: {position: [1.2, 0.0]}}\n"))
+    g = free.goal("jump_0")
+    assert g.t_off == pytest.approx(0.7) and g.t_land - g.t_off == pytest.approx(math.sqrt(2 * 1.2 / 9.81))
+    # a landing region: free landing footprints bounded by it
+    reg = build_scene(_scn("  - {type: jump, character: a, takeoff: {time: 0.8}, landing: {region: "
+                           "{min: [1.0, -0.1], max: [1.4, 0.1]}, time: 1.3}}\n")).character("a").footsteps
+    land = [f for f in reg if f.t0 > 1]
+    assert all(f.free and f.bounds is not None for f in land)
+    # a hop: one foot in the air, the other planted before and after
+    hop = build_scene(_scn("  - {type: hop, character: a, foot: l, takeoff: {time: 0.8}, "
+                           "landing: {position: [0.6, 0.09], time: 1.15}}\n")).character("a").footsteps
+    assert [f.foot for f in hop if f.t0 <= 0.79 <= f.t1] == ["l"]
+    assert [f.foot for f in hop if f.t0 <= 1.2 <= f.t1] == ["l"]
+    # an obstacle: foot springs at obstacle + margin at mid-flight
+    scn = _scn(JUMP + "    obstacle_height: 0.3\n")
+    scene = build_scene(scn)
+    full = [s for s in compile_schedule(scn).order() if s.kind == "full"][0]
+    sp, _ = lower(scene, full, "a")
+    obst = [t for t in sp.targets if t.name == "goal:jump_0"]
+    assert len(obst) == 4 and all(abs(t.point[2] - 0.35) < 1e-9 and abs(t.t - 1.04) < 1e-9 for t in obst)
+    # keyframes: a pelvis spring and a partial pose spring (root yaw and a knee), weighted
+    scn = _scn("  - type: keyframes\n    character: a\n    keys:\n"
+               "      - {time: 0.5, position: [0.1, 0.0, 0.8], heading: 30, joints: {knee_flex_l: 60}, weight: 2}\n")
+    scene = build_scene(scn)
+    full = [s for s in compile_schedule(scn).order() if s.kind == "full"][0]
+    sp, _ = lower(scene, full, "a")
+    w = full.term("goal:keyframes_0")
+    assert [(t.handle, t.point, t.weight) for t in sp.targets if t.name == "goal:keyframes_0"] == \
+        [("pelvis", (0.1, 0.0, 0.8), 2 * w)]
+    (pose,) = sp.poses
+    assert isinstance(pose, PoseTarget) and pose.weight == 2 * w and len(pose.dofs) == 2
+    assert pose.q[3] == pytest.approx(math.radians(30))
+
+
+def test_bundled_jumps_load():
+    for name in ("broad_jump", "twist_jump"):
+        scn = load_scenario(name)
+        assert any(g.type == "jump" for g in scn.goals)
