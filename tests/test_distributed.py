@@ -154,3 +154,16 @@ def test_sync_scheduler_runs_a_graph_and_reports_progress():
     with connect("sync") as sched:
         sched.execute(dsk, ["y", "z"], lambda k, v: seen.append((k, v)))
     assert sorted(seen) == [("y", 2), ("z", 2)]
+
+
+def test_sweep_with_an_unreachable_scheduler_is_exit_2_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    from schedules import distributed
+
+    monkeypatch.setattr(distributed, "CONNECT_TIMEOUT_S", 1.0)
+    out = tmp_path / "sw"
+    rc = cli.main(["sweep", "walk", "--vary", "characters[0].start.heading=0,0.1", "--scheduler", "tcp://127.0.0.1:9",
+                   "-o", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "tcp://127.0.0.1:9: cannot reach the Dask scheduler" in err and "nothing was written" in err
+    assert list(tmp_path.iterdir()) == []
