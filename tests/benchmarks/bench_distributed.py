@@ -28,9 +28,9 @@ What it does (every run in a fresh folder, step stores empty unless said):
    gets SIGKILL.  ``worker_kill_recovered`` = 1 when the scheduler's story of that task shows
    it processing again after the kill and finishing, and the run's step and report numbers
    equal the serial sweep's variant 0 (the same scene; a plain run when the sweep is skipped).
-3. **Crowd**: ``crowd`` (12 characters, 6 couples, 36 steps) on a LocalCluster of 1 and of 2
-   workers, each with its own empty step store (same hashing and writing on both sides);
-   ``crowd_speedup`` = 1-worker / 2-worker wall time.
+3. **Crowd**: ``crowd`` (12 characters, 6 couples, 36 steps) on a LocalCluster of 2 and
+   (after part 4) of 1 worker, each with its own empty step store (same hashing and writing
+   on both sides); ``crowd_speedup`` = 1-worker / 2-worker wall time.
 4. **Edit, re-run**: couple 3's target in ``crowd`` moved 10 cm; the edited scene re-run on
    1 worker with (a copy of) the store the 2-worker crowd run filled, over a fresh 1-worker
    run of the edited scene with an empty store: ``edit_rerun_fraction``; the two must give
@@ -72,8 +72,7 @@ sys.path.insert(0, str(ROOT))
 # worker processes import this checkout too
 os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
 
-SWEEP_N = 8
-SWEEP_VARY = "characters[0].start.heading=0:0.07:0.01"
+SWEEP_N = 8  # variants: characters[0].start.heading = 0, 0.01, ... (SWEEP_N - 1) / 100 rad
 PARTS = ("sweep", "kill", "crowd", "edit")
 EDIT_FROM = "dx: [1.1, 1.2, 1.15, 1.1, 1.2, 1.15]"
 EDIT_TO = "dx: [1.1, 1.2, 1.25, 1.1, 1.2, 1.15]"  # couple 3's targets 10 cm further
@@ -126,6 +125,13 @@ def worker_facts() -> tuple[int, str | None, int]:
     import threading as _th
 
     return _os.getpid(), _os.environ.get("OMP_NUM_THREADS"), _th.active_count()
+
+
+def worker_cpu() -> float:
+    """CPU seconds (user + system) this process has used."""
+    import time as _time
+
+    return _time.process_time()
 
 
 def warm(scenario: str) -> float:
@@ -216,19 +222,20 @@ def run(name: str, work: Path, tag: str, log, **kw) -> tuple[float, dict, bytes]
     return time.perf_counter() - t0, rep, out.read_bytes()
 
 
-def sweep(work: Path, tag: str, log, **kw) -> tuple[float, list]:
+def sweep(work: Path, tag: str, log, n: int, **kw) -> tuple[float, list]:
     from schedules.cli_sweep import run_sweep
 
     out = work / tag
+    vary = f"characters[0].start.heading={','.join(str(i / 100) for i in range(n))}"
     t0 = time.perf_counter()
-    run_sweep("walk", [SWEEP_VARY], str(out), contact_sheet=False, store="", log=log, **kw)
+    run_sweep("walk", [vary], str(out), contact_sheet=False, store="", log=log, **kw)
     dt = time.perf_counter() - t0
     got = []
-    for i in range(SWEEP_N):
+    for i in range(n):
         v = out / f"v{i:03d}"
         rep = json.loads((v / "report.json").read_text())
         stage = (v / "stage.usda").read_text()
-        stage = re.sub(r'"[^"]*v00\d/scenario.yaml"', '"<variant file>"', stage)  # the only path in it
+        stage = re.sub(r'"[^"]*v\d{3}/scenario.yaml"', '"<variant file>"', stage)  # the only path in it
         got.append((numbers(rep), stage))
     return dt, got
 
@@ -316,6 +323,8 @@ def main() -> int:
     ap.add_argument("--parts", default=",".join(PARTS), help=f"comma list of {', '.join(PARTS)} (default: all)")
     ap.add_argument("--workdir", help="keep the runs and bench.log here (default: a temporary folder, removed)")
     ap.add_argument("--quiet", action="store_true", help="phase lines only, not compose's progress lines")
+    ap.add_argument("--sweep-n", type=int, default=SWEEP_N, metavar="N",
+                    help=f"variants in the sweep (default {SWEEP_N}; fewer only to try the benchmark out)")
     args = ap.parse_args()
     parts = [p.strip() for p in args.parts.split(",") if p.strip()]
     bad = [p for p in parts if p not in PARTS]
@@ -344,13 +353,23 @@ def main() -> int:
         try:
             if "sweep" in parts:
                 try:
-                    out.say(f"sweep of {SWEEP_N} walk variants one after another in this process ...")
-                    serial_s, serial = sweep(work, "sweep_serial", out)
-                    out.say(f"sweep one after another: {serial_s:.1f} s")
-                    with local_cluster(2, out, ("walk",)) as (cluster, _, _):
-                        out.say(f"the same sweep on the LocalCluster of 2 workers ...")
-                        dask_s, dasked = sweep(work, "sweep_dask", out, scheduler=cluster.scheduler_address)
-                    out.say(f"sweep on 2 workers: {dask_s:.1f} s; speedup {serial_s / dask_s:.3f}")
+                    out.say(f"sweep of {args.sweep_n} walk variants one after another in this process ...")
+                    c0 = time.process_time()
+                    serial_s, serial = sweep(work, "sweep_serial", out, args.sweep_n)
+                    cpu_s = time.process_time() - c0
+                    out.say(f"sweep one after another: {serial_s:.1f} s wall, {cpu_s:.1f} CPU s "
+                            f"({cpu_s / serial_s:.2f} cores busy)")
+                    with local_cluster(2, out, ("walk",)) as (cluster, client, _):
+                        out.say("the same sweep on the LocalCluster of 2 workers ...")
+                        w0, c0 = client.run(worker_cpu), time.process_time()
+                        dask_s, dasked = sweep(work, "sweep_dask", out, args.sweep_n,
+                                               scheduler=cluster.scheduler_address)
+                        cpu_d = sum(client.run(worker_cpu).values()) - sum(w0.values())
+                        cpu_drv = time.process_time() - c0
+                    out.say(f"sweep on 2 workers: {dask_s:.1f} s wall, workers {cpu_d:.1f} CPU s + driver "
+                            f"{cpu_drv:.1f} CPU s ({cpu_d / dask_s:.2f} of 2 cores busy); speedup "
+                            f"{serial_s / dask_s:.3f}; CPU-time ratio serial/Dask {cpu_s / (cpu_d + cpu_drv):.3f} "
+                            "(1 = the same work; on 2 free cores the speedup approaches 2 x that)")
                     it_s = sum(s[2] for n, _ in serial for s in n if isinstance(s, tuple) and len(s) == 5)
                     it_d = sum(s[2] for n, _ in dasked for s in n if isinstance(s, tuple) and len(s) == 5)
                     checks["sweep"] = serial == dasked
@@ -376,32 +395,31 @@ def main() -> int:
             for k in cap:
                 os.environ.pop(k, None)
 
+        # order: the 2-worker crowd first (it fills the store the edit re-run uses), then the
+        # edit part, then the 1-worker crowd, so a long run shows the cheaper results first
         store2 = work / "store_crowd2"
-        if "crowd" in parts:
+        crowd2 = None
+        if {"crowd", "edit"} & set(parts):
             try:
-                with local_cluster(1, out, ("crowd",)) as (cluster, _, _):
-                    out.say("crowd on 1 worker ...")
-                    t1, rep1, st1 = run("crowd", work, "crowd1", out, scheduler=cluster.scheduler_address,
-                                        store=str(work / "store_crowd1"))
-                out.say(f"crowd on 1 worker: {t1:.1f} s (passes: {rep1['passes']})")
-                with local_cluster(2, out, ("crowd",)) as (cluster, _, _):
-                    out.say("crowd on 2 workers ...")
-                    t2, rep2, st2 = run("crowd", work, "crowd2", out, scheduler=cluster.scheduler_address,
-                                        store=str(store2))
-                checks["crowd"] = numbers(rep1) == numbers(rep2) and st1 == st2
-                out.say(f"crowd on 2 workers: {t2:.1f} s (passes: {rep2['passes']}); crowd_speedup "
-                        f"{t1 / t2:.3f}; 1- and 2-worker results identical: {checks['crowd']}")
+                with local_cluster(2, out, ("crowd",)) as (cluster, client, _):
+                    out.say("crowd on 2 workers (its step store is the edit part's) ...")
+                    w0 = client.run(worker_cpu)
+                    t2_, rep2, st2 = run("crowd", work, "crowd2", out, scheduler=cluster.scheduler_address,
+                                         store=str(store2))
+                    cpu2 = sum(client.run(worker_cpu).values()) - sum(w0.values())
+                crowd2 = (rep2, st2, cpu2)
+                if "crowd" in parts:
+                    t2 = t2_
+                out.say(f"crowd on 2 workers: {t2_:.1f} s wall, workers {cpu2:.1f} CPU s ({cpu2 / t2_:.2f} of 2 cores "
+                        f"busy); passes: {rep2['passes']}")
             except Exception:
                 checks["crowd"] = False
-                out.say("crowd part failed:\n" + traceback.format_exc())
-        if "edit" in parts:
+                out.say("crowd on 2 workers failed:\n" + traceback.format_exc())
+        if "edit" in parts and crowd2 is not None:
             try:
                 edited = edited_crowd(work)
                 with local_cluster(1, out, ("crowd",)) as (cluster, _, _):
                     addr = cluster.scheduler_address
-                    if not store2.is_dir():
-                        out.say("filling a step store with crowd (the crowd part was not run) ...")
-                        run("crowd", work, "crowd_fill", out, scheduler=addr, store=str(store2))
                     shutil.copytree(store2, work / "store_edit")
                     cap_log = _Capture(out)
                     out.say("edited crowd (couple 3's targets +10 cm) re-run on 1 worker with the crowd's step store ...")
@@ -413,20 +431,37 @@ def main() -> int:
                     out.say("edited crowd, fresh run on 1 worker (empty store) ...")
                     tf, repf, stf = run(str(edited), work, "edit_fresh", out, scheduler=addr,
                                         store=str(work / "store_edit_fresh"))
-                checks["edit"] = numbers(repe) == numbers(repf) and ste == stf and reused == "30 of 36"
+                same = numbers(repe) == numbers(repf) and ste == stf
+                checks["edit"] = same and reused == "30 of 36"
                 frac = te / tf
                 out.say(f"edited crowd: re-run {te:.1f} s, fresh {tf:.1f} s: fraction {frac:.3f}; "
-                        f"re-run equals fresh run: {numbers(repe) == numbers(repf) and ste == stf}; "
-                        f"steps from the store: {reused} (expected 30 of 36)")
+                        f"re-run equals fresh run (numbers, stage bytes): {same}; steps from the store: {reused} "
+                        "(expected 30 of 36)")
             except Exception:
                 checks["edit"] = False
                 out.say("edit part failed:\n" + traceback.format_exc())
+        if "crowd" in parts and crowd2 is not None:
+            try:
+                rep2, st2, cpu2 = crowd2
+                with local_cluster(1, out, ("crowd",)) as (cluster, client, _):
+                    out.say("crowd on 1 worker ...")
+                    w0 = client.run(worker_cpu)
+                    t1, rep1, st1 = run("crowd", work, "crowd1", out, scheduler=cluster.scheduler_address,
+                                        store=str(work / "store_crowd1"))
+                    cpu1 = sum(client.run(worker_cpu).values()) - sum(w0.values())
+                checks["crowd"] = numbers(rep1) == numbers(rep2) and st1 == st2
+                out.say(f"crowd on 1 worker: {t1:.1f} s wall, worker {cpu1:.1f} CPU s; crowd_speedup {t1 / t2:.3f}; "
+                        f"CPU-time ratio 1/2 workers {cpu1 / cpu2:.3f} (1 = the same work); 1- and 2-worker "
+                        f"results identical (numbers, stage bytes): {checks['crowd']}")
+            except Exception:
+                checks["crowd"] = False
+                out.say("crowd on 1 worker failed:\n" + traceback.format_exc())
     finally:
         ident = bool(checks) and all(checks.values())
         out.say(f"checks {checks}; total {time.perf_counter() - T0:.0f} s")
         if not args.workdir:
             shutil.rmtree(work, ignore_errors=True)
-        print(f"sweep_n={SWEEP_N} serial_s={serial_s:.2f} dask_s={dask_s:.2f} speedup={serial_s / dask_s:.3f} "
+        print(f"sweep_n={args.sweep_n} serial_s={serial_s:.2f} dask_s={dask_s:.2f} speedup={serial_s / dask_s:.3f} "
               f"crowd_speedup={t1 / t2:.3f} identical={int(ident)} worker_kill_recovered={int(kill_ok)} "
               f"edit_rerun_fraction={frac:.3f}", flush=True)
     return 0
