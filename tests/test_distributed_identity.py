@@ -63,3 +63,25 @@ def test_plain_sync_and_processes_give_identical_results(tmp_path, monkeypatch):
             got = run_schedule_dask(scene, schedule, sched, run_dir=tmp_path / spec, fingerprint="t", log=log)
         assert "2 steps, 1 pre-solve(s)" in log.getvalue()
         assert _facts(got) == plain, spec
+
+
+def _nap_pid(seconds: float) -> int:
+    import os
+    import time
+
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def test_processes_scheduler_hands_out_one_task_at_a_time():
+    """4 independent 1-s tasks on 2 processes: both processes work and results arrive as
+    tasks finish (Dask's multiprocessing default sent all 4 to one process in one batch)."""
+    import time
+
+    seen: list = []
+    dsk = {f"t{i}": (_nap_pid, 1.0) for i in range(4)}
+    with connect("processes", 2) as sched:
+        sched.execute(dsk, list(dsk), lambda k, pid: seen.append((time.perf_counter(), pid)))
+    assert len(seen) == 4
+    assert len({pid for _, pid in seen}) == 2
+    assert seen[-1][0] - seen[0][0] > 0.5  # two rounds of two tasks, not one lump
