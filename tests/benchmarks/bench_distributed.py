@@ -3,9 +3,11 @@
 Run:  python tests/benchmarks/bench_distributed.py [--quick] [--parts sweep,kill,crowd,edit]
                                                     [--workdir DIR] [--quiet]
 
-Expected wall time (2 free cores): about 40 min in full (sweep 7 min, killed worker 1 min,
-crowd on 1 and 2 workers 20 min, edited crowd 12 min); ``--quick`` saves ~4 min of the
-sweep.  On a loaded machine, several times that.  Progress: one ``bench [mm:ss]`` line per
+Expected wall time (2 free cores, estimated from CPU seconds measured under load): about
+35-40 min in full -- sweep ~8 min (8 + 4 walk solves of ~35 s), killed worker ~2 min, crowd on
+2 workers ~5 min, edited crowd re-run ~2 min and fresh ~9 min, crowd on 1 worker ~9 min (the
+crowd is ~480 CPU s of solving + ~25 s of output), plus ~1 min of warm-up per cluster;
+``--quick`` saves ~4 min of the sweep.  On a loaded machine, several times that.  Progress: one ``bench [mm:ss]`` line per
 phase and compose's own progress/ETA lines on stderr (``--quiet``: phase lines only); the
 same lines go to ``DIR/bench.log`` when ``--workdir`` is given.
 
