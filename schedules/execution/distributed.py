@@ -120,7 +120,10 @@ class DaskScheduler:
                 else:
                     import dask.multiprocessing
 
-                    dask.multiprocessing.get(dsk, keys, num_workers=self.jobs)
+                    # chunksize 1: dask.multiprocessing batches 6 ready tasks per submission by
+                    # default, so a worker got 3 of the crowd's 6 ready steps at once and their
+                    # results (progress lines, dependents) arrived together when the last finished
+                    dask.multiprocessing.get(dsk, keys, num_workers=self.jobs, chunksize=1)
             except BaseException:
                 if errors:
                     raise errors[0] from None

@@ -87,8 +87,12 @@ def test_critical_path_uses_measured_times():
 def test_step_key_changes_only_for_the_edited_couple():
     from scenegraph.world.scene import build_scene
 
-    a = parse_scenario(TWO_COUPLES)
-    b = parse_scenario(TWO_COUPLES.replace("tx: [1.0, 1.1]", "tx: [1.0, 1.3]"))
+    a = parse_scenario(TWO_COUPLES, "two_couples.yaml")
+    # the edited copy lives in another file, and a comment line moves every goal one line down:
+    # the goals' scenario locations (file:line, for messages) are not read by a solve
+    b = parse_scenario(TWO_COUPLES.replace("tx: [1.0, 1.1]", "tx: [1.0, 1.3]").replace(
+        "characters: []", "# edited\ncharacters: []"), "edited/two_couples_v2.yaml")
+    assert a.goals and all(g.where != h.where for g, h in zip(build_scene(a).goals, build_scene(b).goals))
     sa, sb = build_scene(a), build_scene(b)
     sched_a, sched_b = compile_schedule(a), compile_schedule(b)
     assert [s.id for s in sched_a] == [s.id for s in sched_b]
@@ -154,3 +158,16 @@ def test_sync_scheduler_runs_a_graph_and_reports_progress():
     with connect("sync") as sched:
         sched.execute(dsk, ["y", "z"], lambda k, v: seen.append((k, v)))
     assert sorted(seen) == [("y", 2), ("z", 2)]
+
+
+def test_sweep_with_an_unreachable_scheduler_is_exit_2_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    from schedules.execution import distributed
+
+    monkeypatch.setattr(distributed, "CONNECT_TIMEOUT_S", 1.0)
+    out = tmp_path / "sw"
+    rc = cli.main(["sweep", "walk", "--vary", "characters[0].start.heading=0,0.1", "--scheduler", "tcp://127.0.0.1:9",
+                   "-o", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "tcp://127.0.0.1:9: cannot reach the Dask scheduler" in err and "nothing was written" in err
+    assert list(tmp_path.iterdir()) == []
