@@ -94,8 +94,21 @@ def _steps_on_motion(ch, motion, steps):
     return tuple(out)
 
 
+def _widen(steps, half: float):
+    """Clip footsteps with every contact interval widened by ``half`` s on both sides: a
+    contact seen in frames a..b lasts from half a frame before a to half a frame after b, so
+    two feet seen down in adjacent frames share that half-frame boundary (no flight)."""
+    from dataclasses import replace
+
+    out = []
+    for st in steps:
+        cs = tuple(replace(c, start=c.start - half, end=c.end + half) for c in st.contacts)
+        out.append(replace(st, start=st.start - half, end=st.end + half, contacts=cs))
+    return out
+
+
 def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz: float = 10.0,
-                reconstruct: bool = True, feasible: bool = True):
+                reconstruct: bool = True, feasible: bool = True, onesided: bool = False):
     """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B).
 
     X_T: the smooth reconstruction (Appendix A; a plain spline fit if ``reconstruct`` is
@@ -103,7 +116,10 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     feet.  With ``feasible`` (default) X_T is then moved onto C (resampled to the synthesis
     resolution and projected by :func:`scenegraph.nio.feasible_target`: exact footsteps, root
     residual softly zero, 0.7° RMS from the reconstruction on 07_01), because NIO compares
-    X_T with motions that satisfy C."""
+    X_T with motions that satisfy C.  With ``onesided`` the contacts are detected with
+    one-sided speeds (:func:`scenegraph.contacts.point_speed`) and widened by half a frame
+    (:func:`_widen`): without it a brisk walk (07_12, 1.9 m/s, 30 fps) comes out as a run
+    with 0.07–0.1 s flight phases and ball-only contacts."""
     from scenegraph.contacts import detect_footsteps
     from scenegraph.mocap import load_clip
     from scenegraph.motion import Motion
@@ -120,7 +136,10 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     else:
         motion = Motion.from_samples(times, np.asarray(clip.q, float),
                                      n_ctrl=max(6, int(round((times[-1] - times[0]) * ctrl_hz)) + 3))
-    steps = _to_spacetime_steps(clip.character, detect_footsteps(clip), times[0], times[-1])
+    found = detect_footsteps(clip, onesided=onesided)
+    if onesided:
+        found = _widen(found, 0.5 / clip.fps)
+    steps = _to_spacetime_steps(clip.character, found, times[0], times[-1])
     if not steps:
         raise InputError(f"{path} frames {frames[0]}:{frames[1]}: no foot contacts detected")
     if _has_flight(steps, times[0], times[-1]):
@@ -178,10 +197,10 @@ def _option_flags(prov: dict) -> str:
 
 
 def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=None, name=None,
-                   progress=None, **run_kw):
+                   progress=None, onesided: bool = False, **run_kw):
     from scenegraph.nio import learn_style
 
-    ch, motion, steps, clip = clip_target(path, frames, body)
+    ch, motion, steps, clip = clip_target(path, frames, body, onesided=onesided)
     res = learn_style(ch, motion, steps, name=name or Path(out or path).stem, clip=Path(path).name,
                       frames=f"{frames[0]}:{frames[1]}", body=body, callback=progress, **run_kw)
     if out is not None:
