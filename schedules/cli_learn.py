@@ -193,6 +193,12 @@ def _option_flags(prov: dict) -> str:
         flags += f" --hessian {prov['hessian']}"
     if prov.get("alpha_floor"):
         flags += f" --alpha-floor {prov['alpha_floor'] * N_JOINT:g}"
+    if prov.get("alpha_prior"):
+        flags += f" --alpha-prior {prov['alpha_prior']:g}"
+    if prov.get("tie"):
+        flags += f" --tie {prov['tie']}"
+    if prov.get("contacts"):
+        flags += f" --contacts {prov['contacts']}"
     return flags
 
 
@@ -203,6 +209,13 @@ def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=
     ch, motion, steps, clip = clip_target(path, frames, body, onesided=onesided)
     res = learn_style(ch, motion, steps, name=name or Path(out or path).stem, clip=Path(path).name,
                       frames=f"{frames[0]}:{frames[1]}", body=body, callback=progress, **run_kw)
+    if onesided:  # the provenance records the contact rule (evaluate-style and the header read it)
+        from scenegraph.style import Provenance
+
+        prov = {**res.style.provenance.model_dump(), "contacts": "onesided"}
+        from dataclasses import replace as _replace
+
+        res = _replace(res, style=res.style.model_copy(update={"provenance": Provenance(**prov)}))
     if out is not None:
         save_learned(res, out, Path(path).name, frames, body)
     return res, (ch, motion, steps, clip)
@@ -215,6 +228,8 @@ def _cmd_learn(args) -> int:
 
     frames = parse_frames(args.frames)
     # every argument is checked before the clip is read and NIO runs for minutes
+    if args.alpha_prior < 0:
+        raise InputError(f"--alpha-prior {args.alpha_prior}: must be >= 0")
     if not 0.0 <= args.alpha_floor <= 1.0:
         raise InputError(f"--alpha-floor {args.alpha_floor}: must lie in [0, 1] (units of 1/M; Σα = 1)")
     if args.max_iter < 1:
@@ -236,7 +251,8 @@ def _cmd_learn(args) -> int:
     try:
         res, _ = learn_from_bvh(args.clip, frames, args.body, args.output, progress=progress,
                                 max_iter=args.max_iter, local=args.counterexamples == "local",
-                                hessian=args.hessian, alpha_floor=args.alpha_floor / N_JOINT)
+                                hessian=args.hessian, alpha_floor=args.alpha_floor / N_JOINT,
+                                prior_weight=args.alpha_prior, tie=args.tie, onesided=args.contacts == "onesided")
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -262,4 +278,12 @@ def register(sub) -> None:
                    help="Hessian of the IPOPT counterexample solves (default gauss_newton)")
     p.add_argument("--alpha-floor", type=float, default=0.0, metavar="F",
                    help="every muscle weight alpha_j >= F/M (default 0: a muscle may cost nothing)")
+    p.add_argument("--alpha-prior", type=float, default=0.0, metavar="W",
+                   help="log-normal prior on alpha around 1/M, weight W in units of the initial G (default 0: none)")
+    p.add_argument("--tie", choices=("none", "lr", "groups"), default="none",
+                   help="hold equal: lr = alpha and springs of left/right DOF pairs; groups = lr plus one alpha per "
+                        "joint group (default none)")
+    p.add_argument("--contacts", choices=("central", "onesided"), default="central",
+                   help="contact detection on the clip: central speed differences (default; the shipped styles), or "
+                        "one-sided speeds widened by half a frame (what evaluate-style uses)")
     p.set_defaults(func=_cmd_learn)
