@@ -1,6 +1,7 @@
 """Benchmark: does a learned style predict the same person's other performances? (issue #18)
 
     python tests/benchmarks/bench_heldout.py [--mocap DIR] [--out DIR] [--max-iter 300] [--learn-iter 200]
+                                             [--alpha-prior W] [--tie none|lr|groups]
 
 Two validation trials, each learned and predicted here (nothing is read from the shipped styles):
 
@@ -57,6 +58,8 @@ def main() -> None:
     ap.add_argument("--out", default="/tmp/bench_heldout", help="folder for the learned styles and the reports")
     ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per synthesis")
     ap.add_argument("--learn-iter", type=int, default=200, help="NIO iteration limit")
+    ap.add_argument("--alpha-prior", type=float, default=0.0, help="compose learn --alpha-prior (0: none)")
+    ap.add_argument("--tie", choices=("none", "lr", "groups"), default="none", help="compose learn --tie")
     ap.add_argument("--only", choices=[t[0] for t in TRIALS], default=None, help="one trial only (a partial line)")
     args = ap.parse_args()
     mocap, out = _mocap_dir(args.mocap), Path(args.out)
@@ -68,7 +71,8 @@ def main() -> None:
         style_path = out / f"{name}_style.yaml"
         t0 = time.perf_counter()
         res, _ = learn_from_bvh(mocap / train, tframes, "adult_male", style_path, name=f"heldout_{name}",
-                                onesided=True, max_iter=args.learn_iter)
+                                onesided=True, max_iter=args.learn_iter, prior_weight=args.alpha_prior,
+                                tie=args.tie)
         learn_s.append(time.perf_counter() - t0)
         print(f"{name}: learned from {train} {tframes[0]}:{tframes[1]} in {learn_s[-1]:.1f} s "
               f"(G {res.g_initial:.4g} -> {res.g_final:.4g}, {res.iterations} iterations, {res.stop_reason})",
