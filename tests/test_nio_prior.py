@@ -66,3 +66,22 @@ def test_model_step_holds_ties_and_follows_the_prior_gradient():
     gP[A.start] = 1.0
     new2, _ = model_step(th, [(-1.0, np.zeros(len(th)))], 0.1, scales, 0.0, (), (0.0, gP))
     assert new2[A.start] < th[A.start]
+
+
+def test_learn_header_names_the_prior_tie_and_contact_options():
+    from schedules.cli_learn import _option_flags
+
+    assert _option_flags({}) == ""
+    flags = _option_flags({"alpha_prior": 1.0, "tie": "lr", "contacts": "onesided"})
+    assert flags == " --alpha-prior 1 --tie lr --contacts onesided"
+
+
+def test_learn_rejects_a_negative_prior_before_reading_the_clip(tmp_path):
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-m", "schedules.cli", "learn", str(tmp_path / "missing.bvh"), "--frames",
+                        "0:10", "--alpha-prior", "-1", "-o", str(tmp_path / "s.yaml")],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "--alpha-prior -1" in p.stderr
+    assert not (tmp_path / "s.yaml").exists()
