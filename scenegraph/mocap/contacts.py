@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Contact", "Footstep", "detect_contacts", "detect_footsteps", "contact_mask", "FOOT_HANDLES"]
+__all__ = ["Contact", "Footstep", "detect_contacts", "detect_footsteps", "contact_mask", "point_speed", "FOOT_HANDLES"]
 
 FOOT_HANDLES = ("heel", "ball", "toe")
 
@@ -83,29 +83,48 @@ def _clean(mask: np.ndarray, max_gap: int, min_frames: int) -> np.ndarray:
     return m
 
 
+def point_speed(positions: np.ndarray, fps: float, onesided: bool = False) -> np.ndarray:
+    """Speed (m/s, (T,)) of one point from its positions (T, 3) at ``fps``.
+
+    Central differences by default.  With ``onesided`` the smaller of the backward and the
+    forward difference: a point that lands in frame k and then stays still is slow *at* k
+    (the central difference there still carries the approach), and a point still up to k
+    that leaves after it is slow at k too.  At 30 fps the central difference marks the
+    touchdown and lift-off frames as moving, which removes the 2–3 frames of double support
+    of a brisk walk (07_12 at 1.9 m/s came out as a run with 0.1 s "flight" phases)."""
+    P = np.asarray(positions, dtype=float)
+    if not onesided:
+        return np.linalg.norm(np.gradient(P, 1.0 / fps, axis=0), axis=1)
+    d = np.linalg.norm(np.diff(P, axis=0), axis=1) * fps
+    back = np.concatenate([[d[0]], d])
+    fwd = np.concatenate([d, [d[-1]]])
+    return np.minimum(back, fwd)
+
+
 def contact_mask(positions: np.ndarray, fps: float, height: float = 0.05, speed: float = 0.4,
-                 max_gap: int = 1, min_duration: float = 0.05) -> np.ndarray:
-    """Boolean (T,) contact mask of one point from its positions (T, 3) at ``fps``."""
+                 max_gap: int = 1, min_duration: float = 0.05, onesided: bool = False) -> np.ndarray:
+    """Boolean (T,) contact mask of one point from its positions (T, 3) at ``fps`` (speeds by
+    :func:`point_speed`)."""
     P = np.asarray(positions, dtype=float)
     if len(P) < 2:
         return P[:, 2] < height
-    v = np.gradient(P, 1.0 / fps, axis=0)
-    sp = np.linalg.norm(v, axis=1)
+    sp = point_speed(P, fps, onesided)
     raw = (P[:, 2] < height) & (sp < speed)
     min_frames = max(1, int(math.ceil(min_duration * fps - 1e-9)))
     return _clean(raw, max_gap, min_frames)
 
 
 def detect_contacts(clip, height: float = 0.05, speed: float = 0.4, max_gap: int = 1,
-                    min_duration: float = 0.05) -> list[Contact]:
-    """Per-handle contact intervals of a :class:`~scenegraph.mocap.clip.MocapClip`, sorted by start."""
+                    min_duration: float = 0.05, onesided: bool = False) -> list[Contact]:
+    """Per-handle contact intervals of a :class:`~scenegraph.mocap.clip.MocapClip`, sorted by start
+    (``onesided``: speeds by one-sided differences, :func:`point_speed`)."""
     names = [f"{h}_{s}" for s in ("l", "r") for h in FOOT_HANDLES]
     P = clip.handle_positions(names)
     times = np.asarray(clip.times)
     out = []
     for k, name in enumerate(names):
         h, s = name.rsplit("_", 1)
-        m = contact_mask(P[:, k], clip.fps, height, speed, max_gap, min_duration)
+        m = contact_mask(P[:, k], clip.fps, height, speed, max_gap, min_duration, onesided)
         for a, b in _runs(m):
             pos = P[a:b + 1, k].mean(axis=0)
             out.append(Contact(s, h, float(times[a]), float(times[b]), a, b, tuple(float(x) for x in pos)))
@@ -114,9 +133,9 @@ def detect_contacts(clip, height: float = 0.05, speed: float = 0.4, max_gap: int
 
 
 def detect_footsteps(clip, height: float = 0.05, speed: float = 0.4, max_gap: int = 1,
-                     min_duration: float = 0.05) -> list[Footstep]:
+                     min_duration: float = 0.05, onesided: bool = False) -> list[Footstep]:
     """Footsteps (per foot, merged over heel/ball/toe contacts) of a fitted clip, by start time."""
-    contacts = detect_contacts(clip, height, speed, max_gap, min_duration)
+    contacts = detect_contacts(clip, height, speed, max_gap, min_duration, onesided)
     times = np.asarray(clip.times)
     steps = []
     for side in ("l", "r"):

@@ -12,6 +12,7 @@ contact forces profiled out by NNLS, for X_T and every counterexample alike.
 The package, in the order of the computation (each module imports only those above it):
 
 - :mod:`.theta`: θ by name (``style.THETA_LAYOUT``), its bounds and projection, D (Eq. 18);
+- :mod:`.prior`: the log-normal prior on α and the left/right / joint-group ties (issue #18);
 - :mod:`.energy`: E(X; θ), ∂E/∂θ and the energy-optimal contact forces (``EnergyModel``);
 - :mod:`.counterexamples`: X_S by a warm-started IPOPT solve or by one Gauss–Newton step
   from X_T within C (the default: IPOPT's capped solves make G mostly solver error); both

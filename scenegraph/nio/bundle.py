@@ -13,6 +13,7 @@ from typing import Callable
 import numpy as np
 
 from scenegraph.model.motion import Motion
+from scenegraph.nio.prior import ALPHA_MIN, log_alpha_prior, tie_average
 from scenegraph.nio.records import History, IterationRecord, NIOResult, Problem
 from scenegraph.nio.theta import ALPHA, project, style_from_theta, theta_bounds, theta_scales
 
@@ -26,10 +27,12 @@ def cut(nio: Problem, theta: np.ndarray, motion: Motion, ET: float, gT: np.ndarr
     return ET - E, gT - g
 
 
-def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray, alpha_floor: float = 0.0):
-    """argmin over δ of max(0, max_i L_i + g_i·δ) + μ Σ|δ/s| subject to Σα = 1, the Style
-    bounds (α ≥ ``alpha_floor``) and the trust box |δ_j| ≤ radius·s_j (an LP).  Returns
-    (θ + δ, model value)."""
+def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray, alpha_floor: float = 0.0,
+               ties=(), lin: tuple[float, np.ndarray] | None = None):
+    """argmin over δ of max(0, max_i L_i + g_i·δ) [+ P0 + gP·δ] + μ Σ|δ/s| subject to Σα = 1,
+    the Style bounds (α ≥ ``alpha_floor``), δ_i = δ_j for every pair of ``ties`` and the trust
+    box |δ_j| ≤ radius·s_j (an LP).  ``lin`` (P0, gP): a prior's value and gradient at θ
+    (:mod:`.prior`), added linearised.  Returns (θ + δ, model value)."""
     from scipy.optimize import linprog
 
     n = len(theta)
@@ -42,7 +45,8 @@ def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray,
     Lmax = max(c[0] for c in cuts)
     mu = 1e-3 * max(Lmax, 1e-12) / max(radius, 1e-12) / n
     # variables: δ (n), u (n) ≥ |δ/s|, t ≥ 0
-    cvec = np.r_[np.zeros(n), np.full(n, mu), 1.0]
+    gP = np.zeros(n) if lin is None else np.asarray(lin[1], float)
+    cvec = np.r_[gP, np.full(n, mu), 1.0]
     rows, rhs = [], []
     for L, g in cuts:
         rows.append(np.r_[g, np.zeros(n), -1.0])
@@ -51,21 +55,32 @@ def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray,
     A2 = np.hstack([-np.diag(1 / scales), -np.eye(n), np.zeros((n, 1))])
     A_ub = np.vstack([np.array(rows), A1, A2])
     b_ub = np.r_[rhs, np.zeros(2 * n)]
-    A_eq = np.r_[np.ones(M), np.zeros(2 * n - M), 0.0][None, :]
+    A_eq = [np.r_[np.ones(M), np.zeros(2 * n - M), 0.0]]
     b_eq = [1.0 - theta[ALPHA].sum()]
+    for i, j in ties:
+        row = np.zeros(2 * n + 1)
+        row[i], row[j] = 1.0, -1.0
+        A_eq.append(row)
+        b_eq.append(0.0)
+    A_eq = np.array(A_eq)
     bounds = list(zip(dlo, dhi)) + [(0, None)] * n + [(0, None)]
     r = linprog(cvec, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
     if r.status != 0:
         return theta.copy(), Lmax
     d = r.x[:n]
-    return theta + d, float(r.x[-1])
+    return theta + d, float(r.x[-1]) + (0.0 if lin is None else float(lin[0] + gP @ d))
 
 
 def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 3,
                g_abs: float = 1e-3, trust: float = 0.03, min_trust: float = 1e-3, max_trust: float = 4.0,
                max_cuts: int = 40, max_tries: int = 4, callback: Callable[[IterationRecord], None] | None = None,
-               seeds: tuple[Motion, ...] = ()) -> NIOResult:
-    """Minimise G + D from θ0 by the bundle method.
+               seeds: tuple[Motion, ...] = (), prior_weight: float = 0.0, ties=()) -> NIOResult:
+    """Minimise G + D (+ P) from θ0 by the bundle method.
+
+    ``prior_weight`` w > 0 adds the log-normal prior on α of :func:`.prior.log_alpha_prior`
+    (scaled by G + D at θ0, linearised in each LP, the true value in every comparison; α ≥
+    :data:`.prior.ALPHA_MIN` keeps its log finite); ``ties`` (θ index pairs, :func:`.prior.tie_pairs`)
+    are held equal (θ0 averaged over each tied set first).
 
     The trial θ gets its own counterexample (``nio.evaluate``: a spacetime solve
     warm-started from the best known motion, or the local step), which is added to the
@@ -85,16 +100,30 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
     th = project(np.asarray(theta0, float))
     a = np.maximum(th[ALPHA], 0)
     th[ALPHA] = a / a.sum()
+    ties = list(ties)
+    if ties:
+        th = tie_average(th, ties)
+    floor = max(nio.alpha_floor, ALPHA_MIN) if prior_weight > 0 else nio.alpha_floor
+    if prior_weight > 0:
+        th[ALPHA] = np.maximum(th[ALPHA], floor)
+        th[ALPHA] /= th[ALPHA].sum()
     scales = theta_scales(style_from_theta(th))
     cur = nio.evaluate(th, tuple(seeds))
+    p_scale = max(cur.G + cur.D, 1e-12)
+
+    def P(theta):
+        return log_alpha_prior(theta, prior_weight, p_scale)
+
+    def extra(e):  # D + P of an evaluation
+        return e.D + P(e.theta)[0]
     bundle: list[Motion] = list(seeds) + ([cur.motion_S] if cur.G > 0 else [])
     n_eval = 1
     log.add(0, cur.G, cur, 0.0, 1)
-    g0 = cur.G + cur.D
+    g0 = cur.G + extra(cur)
     slow, fails, reason, r = 0, 0, "max_iter", trust
     it = 0
     for it in range(1, max_iter + 1):
-        if cur.G + cur.D <= g_abs * max(g0, 1e-300):
+        if cur.G + extra(cur) <= g_abs * max(g0, 1e-300):
             reason = f"G below {g_abs:g} x G_initial"
             it -= 1
             break
@@ -105,11 +134,12 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
         ET, gT, _, _ = nio.measure(cur.theta, nio.target)
         cuts = [cut(nio, cur.theta, m, ET, gT) for m in bundle]
         # G(θ_c) with everything known now (later counterexamples can reveal a larger G)
-        prev = max(0.0, max(c[0] for c in cuts)) + cur.D
+        prev = max(0.0, max(c[0] for c in cuts)) + extra(cur)
         tries = 0
         accepted = False
         while r >= min_trust and tries < max_tries:
-            th_new, model = model_step(cur.theta, cuts, r, scales, nio.alpha_floor)
+            th_new, model = model_step(cur.theta, cuts, r, scales, floor, ties,
+                                       P(cur.theta) if prior_weight > 0 else None)
             pred = prev - model
             if pred <= 1e-12 * max(prev, 1e-300):
                 r *= 0.5
@@ -121,10 +151,10 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
                 bundle.append(new.motion_S)
                 bundle = bundle[-max_cuts:]
             c_new = cut(nio, cur.theta, new.motion_S, ET, gT)
-            prev = max(prev, c_new[0] + cur.D)
-            actual = prev - (new.G + new.D)
+            prev = max(prev, c_new[0] + extra(cur))
+            actual = prev - (new.G + extra(new))
             if nio.verbose:
-                print(f"    trial r={r:.3g}: G(θ_c)={prev:.5g} model={model:.5g} G(trial)={new.G + new.D:.5g}",
+                print(f"    trial r={r:.3g}: G(θ_c)={prev:.5g} model={model:.5g} G(trial)={new.G + extra(new):.5g}",
                       flush=True)
             if actual > 0:
                 cur = new
@@ -136,7 +166,7 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
             r *= 0.5
             cuts.append(c_new)
         if not accepted:
-            log.add(it, prev - cur.D, cur, 0.0, tries)
+            log.add(it, prev - extra(cur), cur, 0.0, tries)
             fails += 1
             r = max(r, 4 * min_trust)
             if fails >= patience:
@@ -145,7 +175,7 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
             continue
         fails = 0
         log.add(it, cur.G, cur, r_used, tries)
-        rel = (prev - (cur.G + cur.D)) / max(prev, 1e-300)
+        rel = (prev - (cur.G + extra(cur))) / max(prev, 1e-300)
         slow = slow + 1 if rel < rtol else 0
         if slow >= patience:
             reason = f"relative decrease < {rtol} for {patience} iterations"

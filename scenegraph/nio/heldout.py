@@ -21,7 +21,7 @@ __all__ = ["JOINT_GROUPS", "group_indices", "group_rms_deg", "root_path_error_m"
 _LEGS = ("hip_", "knee_", "ankle_", "toe_")
 _TRUNK = ("waist_", "chest_", "neck_")
 _ARMS = ("shoulder_", "elbow_", "wrist_")
-JOINT_GROUPS = ("legs", "pelvis_trunk", "arms", "all")
+JOINT_GROUPS = ("legs", "pelvis_trunk", "arms", "trunk_arms", "all")
 
 
 def group_indices(group: str) -> np.ndarray:
@@ -29,8 +29,10 @@ def group_indices(group: str) -> np.ndarray:
 
     legs: hip, knee, ankle, toe; pelvis_trunk: waist, chest, neck (the pelvis's own rotation
     is the root's, read by the pelvis features of :func:`style_features`); arms:
-    shoulder, elbow, wrist; all: every joint DOF."""
-    pre = {"legs": _LEGS, "pelvis_trunk": _TRUNK, "arms": _ARMS, "all": ("",)}.get(group)
+    shoulder, elbow, wrist; trunk_arms: pelvis_trunk and arms together (the upper body, where
+    issue #18's goal compares styles); all: every joint DOF."""
+    pre = {"legs": _LEGS, "pelvis_trunk": _TRUNK, "arms": _ARMS, "trunk_arms": _TRUNK + _ARMS,
+           "all": ("",)}.get(group)
     if pre is None:
         raise ValueError(f"unknown joint group {group!r} (one of {', '.join(JOINT_GROUPS)})")
     return np.array([N_ROOT + j for j, d in enumerate(JOINT_DOF_NAMES) if d.startswith(pre)], int)

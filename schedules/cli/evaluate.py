@@ -22,6 +22,7 @@ from scenarios.errors import ComposeError, InputError, Location
 __all__ = ["register", "evaluate_style", "VARIANTS", "find_training_clip"]
 
 VARIANTS = ("learned", "default", "springs_off", "kinematic")
+CONTACT_RULES = ("onesided", "central")
 BODIES = ("adult_male", "adult_female", "child")
 
 
@@ -81,7 +82,7 @@ def _noise_floor(t, q, by_foot) -> dict[str, float] | None:
     return {g: float(np.sqrt(np.mean([p[g] ** 2 for p in parts]))) for g in parts[0]}
 
 
-def _training_features(style, test_clip: Path) -> tuple[dict | None, str | None]:
+def _training_features(style, test_clip: Path, onesided: bool = False) -> tuple[dict | None, str | None]:
     """The training clip's style features, or (None, why skipped)."""
     from scenegraph.mocap.contacts import detect_footsteps
     from scenegraph.nio.heldout import style_features
@@ -97,14 +98,21 @@ def _training_features(style, test_clip: Path) -> tuple[dict | None, str | None]
     clip = load_clip(path, frames=frames, preset=prov.body or "adult_male")
     t = np.asarray(clip.times, float)
     m = np.zeros((len(t), 2), bool)
-    for st in detect_footsteps(clip):
+    for st in detect_footsteps(clip, onesided=onesided):
         m[:, 0 if st.side == "l" else 1] |= (t >= st.start) & (t <= st.end)
     return {"file": str(path), "frames": prov.frames, "features": style_features(t, np.asarray(clip.q), m)}, None
 
 
 def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None, body: str = "adult_male",
-                   max_iter: int = 300, log=None) -> dict:
-    """The held-out report (a JSON-ready dict) of a learned style on a test trial."""
+                   max_iter: int = 300, log=None, contacts: str = "onesided") -> dict:
+    """The held-out report (a JSON-ready dict) of a learned style on a test trial.
+
+    ``contacts``: "onesided" (default) detects the trial's and the training clip's contacts
+    with one-sided speeds widened by half a frame (``schedules.cli.learn.clip_target``); "central" is
+    the detection of the first measurements, which turned 07_12's brisk walk into a run."""
+    if contacts not in CONTACT_RULES:
+        raise InputError(f"--contacts {contacts!r}: one of {', '.join(CONTACT_RULES)}")
+    onesided = contacts == "onesided"
     from scenegraph.nio import heldout as H
     from scenegraph.model.audit import audit_motion
     from scenegraph.nio import example_of
@@ -122,13 +130,14 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     t_start = time.perf_counter()
     # the trial's footsteps, detected on the clip and placed where a spline fit of its IK puts the
     # feet (the Appendix A reconstruction is not needed here and did not converge on 07_12 30:246)
-    ch, _, steps, clip = clip_target(test_path, frames or (None, None), body, reconstruct=False, feasible=False)
+    ch, _, steps, clip = clip_target(test_path, frames or (None, None), body, reconstruct=False, feasible=False,
+                                   onesided=onesided)
     t = np.asarray(clip.times, float)
     q_real = np.asarray(clip.q, float)
     t0, t1 = float(t[0]), float(t[-1])
     say(f"test trial: {len(t)} frames, {t1 - t0:.2f} s, {len(steps)} footsteps")
 
-    train, why = _training_features(learned, test_path)
+    train, why = _training_features(learned, test_path, onesided)
     if why:
         skipped.append(f"direction score: {why}")
     if learned.example is not None:
@@ -138,7 +147,8 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         from schedules.cli.learn import parse_frames
 
         _, xt, tsteps, _ = clip_target(train["file"], parse_frames(learned.provenance.frames),
-                                       learned.provenance.body or body, reconstruct=False, feasible=False)
+                                       learned.provenance.body or body, reconstruct=False, feasible=False,
+                                       onesided=onesided)
         example = example_of(xt, tsteps).arrays()
         example_src = f"training clip {train['file']}"
     else:
@@ -213,6 +223,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
                      "footfalls are the trial's",
         "initial_motion": example_src,
         "max_iter": max_iter,
+        "contacts": contacts,
         "groups": {g: [ch.dof_names[i] for i in H.group_indices(g)] for g in H.JOINT_GROUPS},
         "real": {"features": real_feat},
         "training": train,
@@ -294,7 +305,7 @@ def _cmd_evaluate(args) -> int:
     print(f"compose evaluate-style: {args.style} on {args.test}", file=sys.stderr, flush=True)
     try:
         rep = evaluate_style(args.style, args.test, frames, args.body, args.max_iter,
-                             log=lambda s: print(f"  {s}", file=sys.stderr, flush=True))
+                             log=lambda s: print(f"  {s}", file=sys.stderr, flush=True), contacts=args.contacts)
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -327,4 +338,7 @@ def register(sub) -> None:
     p.add_argument("--body", default="adult_male", help="body preset (adult_male, adult_female, child)")
     p.add_argument("--report", required=True, metavar="R.json")
     p.add_argument("--max-iter", type=int, default=300, help="IPOPT iteration cap per synthesis (default 300)")
+    p.add_argument("--contacts", default="onesided", choices=CONTACT_RULES,
+                   help="contact detection: one-sided speeds widened by half a frame (default), or the "
+                        "central differences of the first measurements")
     p.set_defaults(func=_cmd_evaluate)

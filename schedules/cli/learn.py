@@ -94,8 +94,21 @@ def _steps_on_motion(ch, motion, steps):
     return tuple(out)
 
 
+def _widen(steps, half: float):
+    """Clip footsteps with every contact interval widened by ``half`` s on both sides: a
+    contact seen in frames a..b lasts from half a frame before a to half a frame after b, so
+    two feet seen down in adjacent frames share that half-frame boundary (no flight)."""
+    from dataclasses import replace
+
+    out = []
+    for st in steps:
+        cs = tuple(replace(c, start=c.start - half, end=c.end + half) for c in st.contacts)
+        out.append(replace(st, start=st.start - half, end=st.end + half, contacts=cs))
+    return out
+
+
 def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz: float = 10.0,
-                reconstruct: bool = True, feasible: bool = True):
+                reconstruct: bool = True, feasible: bool = True, onesided: bool = False):
     """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B).
 
     X_T: the smooth reconstruction (Appendix A; a plain spline fit if ``reconstruct`` is
@@ -103,7 +116,10 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     feet.  With ``feasible`` (default) X_T is then moved onto C (resampled to the synthesis
     resolution and projected by :func:`scenegraph.nio.feasible_target`: exact footsteps, root
     residual softly zero, 0.7° RMS from the reconstruction on 07_01), because NIO compares
-    X_T with motions that satisfy C."""
+    X_T with motions that satisfy C.  With ``onesided`` the contacts are detected with
+    one-sided speeds (:func:`scenegraph.mocap.contacts.point_speed`) and widened by half a frame
+    (:func:`_widen`): without it a brisk walk (07_12, 1.9 m/s, 30 fps) comes out as a run
+    with 0.07–0.1 s flight phases and ball-only contacts."""
     from scenegraph.mocap.contacts import detect_footsteps
     from scenegraph.mocap.clip import load_clip
     from scenegraph.model.motion import Motion
@@ -120,7 +136,10 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     else:
         motion = Motion.from_samples(times, np.asarray(clip.q, float),
                                      n_ctrl=max(6, int(round((times[-1] - times[0]) * ctrl_hz)) + 3))
-    steps = _to_spacetime_steps(clip.character, detect_footsteps(clip), times[0], times[-1])
+    found = detect_footsteps(clip, onesided=onesided)
+    if onesided:
+        found = _widen(found, 0.5 / clip.fps)
+    steps = _to_spacetime_steps(clip.character, found, times[0], times[-1])
     if not steps:
         raise InputError(f"{path} frames {frames[0]}:{frames[1]}: no foot contacts detected")
     if _has_flight(steps, times[0], times[-1]):
@@ -174,16 +193,29 @@ def _option_flags(prov: dict) -> str:
         flags += f" --hessian {prov['hessian']}"
     if prov.get("alpha_floor"):
         flags += f" --alpha-floor {prov['alpha_floor'] * N_JOINT:g}"
+    if prov.get("alpha_prior"):
+        flags += f" --alpha-prior {prov['alpha_prior']:g}"
+    if prov.get("tie"):
+        flags += f" --tie {prov['tie']}"
+    if prov.get("contacts"):
+        flags += f" --contacts {prov['contacts']}"
     return flags
 
 
 def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=None, name=None,
-                   progress=None, **run_kw):
+                   progress=None, onesided: bool = False, **run_kw):
     from scenegraph.nio import learn_style
 
-    ch, motion, steps, clip = clip_target(path, frames, body)
+    ch, motion, steps, clip = clip_target(path, frames, body, onesided=onesided)
     res = learn_style(ch, motion, steps, name=name or Path(out or path).stem, clip=Path(path).name,
                       frames=f"{frames[0]}:{frames[1]}", body=body, callback=progress, **run_kw)
+    if onesided:  # the provenance records the contact rule (evaluate-style and the header read it)
+        from scenegraph.model.style import Provenance
+
+        prov = {**res.style.provenance.model_dump(), "contacts": "onesided"}
+        from dataclasses import replace as _replace
+
+        res = _replace(res, style=res.style.model_copy(update={"provenance": Provenance(**prov)}))
     if out is not None:
         save_learned(res, out, Path(path).name, frames, body)
     return res, (ch, motion, steps, clip)
@@ -196,6 +228,8 @@ def _cmd_learn(args) -> int:
 
     frames = parse_frames(args.frames)
     # every argument is checked before the clip is read and NIO runs for minutes
+    if args.alpha_prior < 0:
+        raise InputError(f"--alpha-prior {args.alpha_prior}: must be >= 0")
     if not 0.0 <= args.alpha_floor <= 1.0:
         raise InputError(f"--alpha-floor {args.alpha_floor}: must lie in [0, 1] (units of 1/M; Σα = 1)")
     if args.max_iter < 1:
@@ -217,7 +251,8 @@ def _cmd_learn(args) -> int:
     try:
         res, _ = learn_from_bvh(args.clip, frames, args.body, args.output, progress=progress,
                                 max_iter=args.max_iter, local=args.counterexamples == "local",
-                                hessian=args.hessian, alpha_floor=args.alpha_floor / N_JOINT)
+                                hessian=args.hessian, alpha_floor=args.alpha_floor / N_JOINT,
+                                prior_weight=args.alpha_prior, tie=args.tie, onesided=args.contacts == "onesided")
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -243,4 +278,12 @@ def register(sub) -> None:
                    help="Hessian of the IPOPT counterexample solves (default gauss_newton)")
     p.add_argument("--alpha-floor", type=float, default=0.0, metavar="F",
                    help="every muscle weight alpha_j >= F/M (default 0: a muscle may cost nothing)")
+    p.add_argument("--alpha-prior", type=float, default=0.0, metavar="W",
+                   help="log-normal prior on alpha around 1/M, weight W in units of the initial G (default 0: none)")
+    p.add_argument("--tie", choices=("none", "lr", "groups"), default="none",
+                   help="hold equal: lr = alpha and springs of left/right DOF pairs; groups = lr plus one alpha per "
+                        "joint group (default none)")
+    p.add_argument("--contacts", choices=("central", "onesided"), default="central",
+                   help="contact detection on the clip: central speed differences (default; the shipped styles), or "
+                        "one-sided speeds widened by half a frame (what evaluate-style uses)")
     p.set_defaults(func=_cmd_learn)

@@ -23,6 +23,7 @@ def _col(name):
 def test_groups_partition_the_joints_and_exclude_the_root():
     parts = [set(H.group_indices(g)) for g in ("legs", "pelvis_trunk", "arms")]
     assert set().union(*parts) == set(H.group_indices("all")) == set(range(N_ROOT, N_DOF))
+    assert set(H.group_indices("trunk_arms")) == parts[1] | parts[2]
     assert sum(len(p) for p in parts) == N_DOF - N_ROOT
     assert _col("knee_flex_l") in parts[0] and _col("waist_lat") in parts[1] and _col("elbow_flex_r") in parts[2]
     with pytest.raises(ValueError, match="unknown joint group"):
@@ -207,7 +208,7 @@ def test_end_to_end_on_a_short_slice(tmp_path):
     if rep["plot"] is not None:
         assert Path(rep["plot"]).is_file() and Path(rep["plot"]).stat().st_size > 1000
     for v in rep["variants"].values():
-        assert set(v["rms_deg"]) == {"legs", "pelvis_trunk", "arms", "all"}
+        assert set(v["rms_deg"]) == {"legs", "pelvis_trunk", "arms", "trunk_arms", "all"}
         assert 0.0 < v["rms_deg"]["all"] < 60.0
         assert set(v["features"]) == set(H.FEATURE_NAMES)
         assert "root_residual_rms" in v["audit"]
