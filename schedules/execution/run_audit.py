@@ -33,8 +33,9 @@ def allowed_contacts(scene) -> list[str]:
                 if a != b:
                     out.append(f"{prim(a)}/{prim(a)}_{ba}~{prim(b)}/{prim(b)}_{bb}")
     for g in scene.goals:
-        if g.type == "tackle" and g.partner:
-            out.append(f"{prim(g.character)}/*~{prim(g.partner)}/*")
+        pair = g.touches()
+        if pair is not None:
+            out.append(f"{prim(pair[0])}/*~{prim(pair[1])}/*")
     return sorted(set(out))
 
 

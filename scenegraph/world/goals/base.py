@@ -98,6 +98,11 @@ class GoalRecord:
         kind and rank (file order)."""
         raise NotImplementedError(f"{cls.kind} has a step rank but plans no footsteps")
 
+    def touches(self) -> tuple[str, str] | None:
+        """Two characters whose bodies this goal asks to touch (a tackle's attacker and
+        target), exempt from the bodies-apart checks; None (the default) for the rest."""
+        return None
+
     def gait_change(self, who: str) -> tuple[float, float, str] | None:
         """(time s, blend s, gait) when this goal changes ``who``'s gait (default: None)."""
         return None

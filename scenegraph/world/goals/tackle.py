@@ -58,6 +58,9 @@ class Tackle(AdversarialGoal):
     def springs(self, scene, me, budget: float, weight: float) -> list:
         return tackle_targets(scene, self, me, budget, weight)
 
+    def touches(self) -> tuple[str, str]:
+        return (self.character, self.partner)
+
     def step_rank(self, who: str) -> int | None:
         """The attacker's run (2); the target walks straight ahead unless it walks (3)."""
         return RANK_CHASE if who == self.character else RANK_WALK_AHEAD if who == self.partner else None
