@@ -39,12 +39,14 @@ def _edit(args) -> int:
     return 0
 
 
+DESCRIPTION = ("Fit the clip, pre-fit its momentum curves, and solve for a jump that lands --longer m further, "
+               "rises --higher m higher and turns --turn degrees more with the clip's momentum shape "
+               "(docs/dynamic-motion.md). Writes a USD stage, a BVH and a JSON report.")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("edit", help="edit a captured jump (longer, higher, turned) keeping its momentum pattern",
-                       description="Fit the clip, pre-fit its momentum curves, and solve for a jump that lands "
-                                   "--longer m further, rises --higher m higher and turns --turn degrees more "
-                                   "with the clip's momentum shape (docs/dynamic-motion.md). Writes a USD stage, "
-                                   "a BVH and a JSON report.")
+                       description=DESCRIPTION)
     p.add_argument("clip", metavar="CLIP.bvh")
     p.add_argument("--frames", metavar="A:B", help="source frames [A, B) of the jump (default: all)")
     p.add_argument("--longer", type=float, default=0.0, metavar="M", help="land this much further (m)")

@@ -21,6 +21,7 @@ import numpy as np
 
 from scenarios.errors import InputError, Location
 from scenarios.loader import find_scenario, load_scenario
+from schedules.cli.options import add_scenario_argument, add_solve_options
 
 __all__ = ["register", "run_scenario", "goal_report", "goal_verdict", "tackle_entry", "avoid_entry",
            "violation_line", "extra_mass_entries"]
@@ -340,28 +341,16 @@ def _run(args) -> int:
     return 0 if rep["passes"] else 1
 
 
+RUN_DESCRIPTION = ("Compile a scenario into its schedule, solve every step (with checkpoints in the run folder) and "
+                   "write a USD stage plus a JSON report. Exit 2 on bad input, 1 when a solve fails.")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("run", help="solve a scenario and write a USD stage and a report",
-                       description="Compile a scenario into its schedule, solve every step (with checkpoints in "
-                                   "the run folder) and write a USD stage plus a JSON report. Exit 2 on bad "
-                                   "input, 1 when a solve fails.")
-    p.add_argument("file", metavar="NAME|FILE", help="scenario file or bundled scenario name")
+    p = sub.add_parser("run", help="solve a scenario and write a USD stage and a report", description=RUN_DESCRIPTION)
+    add_scenario_argument(p)
     p.add_argument("-o", "--output", metavar="OUT.usda", help="USD stage (.usda, .usdc, .usdz); "
                                                               "default <scenario name>.usda here")
     p.add_argument("--report", metavar="R.json", help="JSON report; default <run folder>/report.json")
-    p.add_argument("--jobs", type=int, default=1, metavar="N", help="solve independent steps in N processes")
-    p.add_argument("--resume", action="store_true", help="continue an interrupted run from its run folder")
     p.add_argument("--run-dir", metavar="DIR", help="checkpoint folder; default runs/<scenario name>")
-    p.add_argument("--fps", type=float, default=30.0, help="frame rate of the exported stage (default 30)")
-    p.add_argument("--fail-capped", action="store_true",
-                   help="fail the run when a full step stops unconverged (its iteration cap, or a numerical "
-                        "breakdown such as a failed restoration phase), even with every constraint satisfied "
-                        "(default: such a step is kept, with its status in the report)")
-    p.add_argument("--scheduler", metavar="local|processes|sync|ADDRESS",
-                   help="run the steps as a Dask task graph: local (LocalCluster of --jobs worker processes), "
-                        "processes, sync, or a Dask scheduler address such as tcp://host:8786 (docs/distributed.md); "
-                        "default: the plain executor")
-    p.add_argument("--store", metavar="DIR", help="content-addressed step store used with --scheduler (default "
-                                                  "$COMPOSE_STEP_STORE or ~/.cache/compose/steps)")
-    p.add_argument("--no-store", action="store_true", help="with --scheduler: solve every step, store nothing")
+    add_solve_options(p, what="steps")
     p.set_defaults(func=_run)

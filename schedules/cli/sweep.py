@@ -35,6 +35,7 @@ from scenarios.errors import ComposeError, InputError, Location
 from schedules.execution.checkpoints import atomic_write_text
 from schedules.plan.sweep import build_variants, parse_vary
 from schedules.execution.sweep_outputs import summary_row, write_contact_sheet, write_summary
+from schedules.cli.options import add_scenario_argument, add_solve_options
 
 __all__ = ["register", "run_sweep", "run_variant"]
 
@@ -170,18 +171,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Vary scenario fields (--vary PATH=VALUES, several allowed), validate every "
                                    "combination, run each one and write per-variant stages and reports, a "
                                    "summary CSV and a contact sheet. Exit 2 on bad input, 1 if a variant fails.")
-    p.add_argument("file", metavar="NAME|FILE", help="scenario file or bundled scenario name")
+    add_scenario_argument(p)
     p.add_argument("--vary", action="append", metavar="PATH=VALUES",
                    help="a field path and its values: START:STOP:STEP or a comma list, "
                         "e.g. characters[0].start.heading=0:180:20")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="sweep folder")
-    p.add_argument("--scheduler", metavar="local|processes|sync|ADDRESS",
-                   help="run variants as Dask tasks (see compose run --scheduler); default: one after another")
-    p.add_argument("--jobs", type=int, default=1, metavar="N", help="local worker processes (with --scheduler)")
-    p.add_argument("--resume", action="store_true", help="continue an interrupted sweep in DIR")
-    p.add_argument("--store", metavar="DIR", help="content-addressed step store (with --scheduler)")
-    p.add_argument("--no-store", action="store_true", help="with --scheduler: no step store")
-    p.add_argument("--fps", type=float, default=30.0, help="frame rate of the stages (default 30)")
-    p.add_argument("--fail-capped", action="store_true", help="as in compose run")
     p.add_argument("--no-contact-sheet", action="store_true", help="do not draw contact_sheet.png")
+    add_solve_options(p, what="variants")
     p.set_defaults(func=_sweep)
