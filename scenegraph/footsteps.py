@@ -19,7 +19,7 @@ from .body import Character
 
 __all__ = ["Footstep", "contact_points", "WALK_HEEL", "WALK_BALL", "RUN_BALL", "footsteps_for_walk", "Gait",
            "GAITS", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH", "foot_length", "gait_footsteps",
-           "walk_footsteps", "standing_footsteps"]
+           "walk_footsteps", "standing_footsteps", "leap_footsteps", "LEAP_HEEL_LIFT", "LEAP_HEEL_DOWN", "HOP_SWAP"]
 
 WALK_HEEL = (0.0, 0.6)   # heel on the ground during this part of the stance
 WALK_BALL = (0.15, 1.0)  # ball on the ground during this part
@@ -27,6 +27,9 @@ RUN_BALL = (0.0, 1.0)
 CADENCE = 1.85          # steps per second of generated walks
 STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
 FOOT_WIDTH = 0.18       # m, lateral distance between the feet of every generated footstep plan
+LEAP_HEEL_LIFT = 0.12  # s: before a jump's take-off the heel leaves the ground this long before the ball
+LEAP_HEEL_DOWN = 0.05  # s: at a landing the heel meets the ground this long after the ball
+HOP_SWAP = 0.3  # s: after a hop's landing the other foot comes down this long later (or half the stance)
 
 
 @dataclass(frozen=True)
@@ -228,4 +231,77 @@ def footsteps_for_walk(n_steps: int = 4, step_length: float = 0.7, cadence: floa
         y = width / 2 if foot == "l" else -width / 2
         steps.append(Footstep(foot, (0.1 + i * step_length, y), t0, t0 + stance, heel=heel, ball=ball))
         foot = "l" if foot == "r" else "r"
+    return tuple(steps)
+
+
+# --- jumps and hops (scenegraph/leaps.py: the stages) ---------------------------------------
+
+def _feet(P, heading: float, foot_length: float, foot: str | None) -> dict[str, tuple[float, float]]:
+    """Ball positions (x, y) of the feet standing around P (a jump: the feet midpoint; a hop:
+    the hopping foot's heel-ball midpoint, the other foot FOOT_WIDTH to its side)."""
+    u = np.array([math.cos(heading), math.sin(heading)])
+    lat = np.array([-u[1], u[0]])
+    P = np.asarray(P, float)
+    out = {}
+    for f, side in (("l", 1.0), ("r", -1.0)):
+        if foot is None:
+            c = P + side * FOOT_WIDTH / 2 * lat
+        elif f == foot:
+            c = P
+        else:
+            c = P + (FOOT_WIDTH if foot == "r" else -FOOT_WIDTH) * lat
+        b = c + u * foot_length / 2
+        out[f] = (float(b[0]), float(b[1]))
+    return out
+
+
+def _bounds(region, heading: float, foot_length: float, offset) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Bounds of a ball position whose feet midpoint lies in ``region`` ((x0, y0), (x1, y1))."""
+    (x0, y0), (x1, y1) = region
+    return ((x0 + offset[0], y0 + offset[1]), (x1 + offset[0], y1 + offset[1]))
+
+
+def _stance(foot, P, heading, t0, t1, *, lift: bool, land: bool, free=False, bounds=None, ball_xy=None):
+    span = t1 - t0
+    a = min(LEAP_HEEL_DOWN / span, 0.3) if land else 0.0
+    b = 1.0 - min(LEAP_HEEL_LIFT / span, 0.4) if lift else 1.0
+    return Footstep(foot, ball_xy, float(t0), float(t1), float(heading), heel=(a, b), ball=(0.0, 1.0), free=free,
+                    bounds=bounds)
+
+
+def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep, ...]:
+    """Footsteps of a character that stands at ``start`` (x, y, heading; m, rad) and leaps
+    ``leaps`` (Jump records in time order) within [0, T] s."""
+    steps: list[Footstep] = []
+    P, h = (start[0], start[1]), start[2]
+    t_prev, prev_foot, prev_region = 0.0, None, None  # start: standing on both feet
+    seq = list(leaps) + [None]
+    for k, lp in enumerate(seq):
+        t_end = lp.t_off if lp is not None else T
+        feet_next = ("l", "r") if lp is None or lp.foot is None else (lp.foot,)
+        down = ("l", "r") if prev_foot is None else (prev_foot,)
+        balls = _feet(P, h, foot_length, prev_foot)
+        for f in ("l", "r"):
+            on_from = t_prev if f in down else None
+            if on_from is None and (f in feet_next or lp is None):  # the other foot comes down after a hop
+                on_from = t_prev + min(HOP_SWAP, (t_end - t_prev) / 2)
+            if on_from is None:
+                continue
+            off_at = t_end
+            if lp is not None and f not in feet_next:  # lifts before a hop on the other foot
+                off_at = on_from + (t_end - on_from) / 2
+            if off_at - on_from < 0.05:
+                continue
+            bounds = None
+            if prev_region is not None:
+                mid = np.asarray(balls[f]) - np.asarray(P)
+                bounds = _bounds(prev_region, h, foot_length, mid)
+            steps.append(_stance(f, P, h, on_from, off_at, lift=lp is not None and f in feet_next,
+                                 land=k > 0 and f in down, free=bounds is not None, bounds=bounds,
+                                 ball_xy=balls[f]))
+        if lp is None:
+            break
+        P, h = lp.landing, lp.heading + lp.turn
+        t_prev, prev_foot, prev_region = lp.t_land, lp.foot, lp.landing_region
+    steps.sort(key=lambda f: (f.t0, f.foot))
     return tuple(steps)
