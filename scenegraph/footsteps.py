@@ -255,13 +255,15 @@ def _feet(P, heading: float, foot_length: float, foot: str | None) -> dict[str, 
     return out
 
 
-def _bounds(region, heading: float, foot_length: float, offset) -> tuple[tuple[float, float], tuple[float, float]]:
+def _bounds(region, offset) -> tuple[tuple[float, float], tuple[float, float]]:
     """Bounds of a ball position whose feet midpoint lies in ``region`` ((x0, y0), (x1, y1))."""
     (x0, y0), (x1, y1) = region
     return ((x0 + offset[0], y0 + offset[1]), (x1 + offset[0], y1 + offset[1]))
 
 
-def _stance(foot, P, heading, t0, t1, *, lift: bool, land: bool, free=False, bounds=None, ball_xy=None):
+def _stance(foot, heading, t0, t1, *, lift: bool, land: bool, free=False, bounds=None, ball_xy=None):
+    """One leap stance: heel down LEAP_HEEL_DOWN after the ball at a landing, up LEAP_HEEL_LIFT
+    before a take-off."""
     span = t1 - t0
     a = min(LEAP_HEEL_DOWN / span, 0.3) if land else 0.0
     b = 1.0 - min(LEAP_HEEL_LIFT / span, 0.4) if lift else 1.0
@@ -278,6 +280,8 @@ def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep
     seq = list(leaps) + [None]
     for k, lp in enumerate(seq):
         t_end = lp.t_off if lp is not None else T
+        if lp is not None:  # the take-off stance: where the leap's take-off says (default: where it stands)
+            P = lp.takeoff
         feet_next = ("l", "r") if lp is None or lp.foot is None else (lp.foot,)
         down = ("l", "r") if prev_foot is None else (prev_foot,)
         balls = _feet(P, h, foot_length, prev_foot)
@@ -295,8 +299,8 @@ def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep
             bounds = None
             if prev_region is not None:
                 mid = np.asarray(balls[f]) - np.asarray(P)
-                bounds = _bounds(prev_region, h, foot_length, mid)
-            steps.append(_stance(f, P, h, on_from, off_at, lift=lp is not None and f in feet_next,
+                bounds = _bounds(prev_region, mid)
+            steps.append(_stance(f, h, on_from, off_at, lift=lp is not None and f in feet_next,
                                  land=k > 0 and f in down, free=bounds is not None, bounds=bounds,
                                  ball_xy=balls[f]))
         if lp is None:

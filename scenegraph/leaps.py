@@ -75,6 +75,7 @@ def leap_motion(ch: Character, leaps, start, T: float, ctrl_per_second: float = 
     tuck = np.zeros(len(t))
     P, h = np.array(start[:2], float), float(start[2])
     for lp in leaps:
+        P = np.asarray(lp.takeoff, float)
         tf = lp.t_land - lp.t_off
         dip = DIP if lp.foot is None else DIP / 2
         ramp = 0.3
