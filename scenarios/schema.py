@@ -457,9 +457,9 @@ LEAP_FLIGHT_RANGE = (0.25, 0.8)  # s: nominal flight times are clipped to this
 class LeapEnd(_Model):
     """Where (and optionally when) a jump or hop leaves or meets the ground."""
 
-    position: Point2 | None = Field(None, description="[x, y] (m): the midpoint of the feet (a hop: the foot's "
-                                                      "heel-ball midpoint); default for a take-off: where the "
-                                                      "character stands")
+    position: Point2 | None = Field(None, description="[x, y] (m): the midpoint of the feet it stands on (after "
+                                                      "a hop's landing: the foot's heel-ball midpoint); default "
+                                                      "for a take-off: where the character stands")
     region: Region | None = Field(None, description="instead of position: the feet land (or take off) anywhere "
                                                     "in this rectangle; the optimisation places them")
     time: Seconds | None = Field(None, description="when (s): the last moment on the ground (take-off) or the "
@@ -881,6 +881,9 @@ class Scenario(_Model):
                             "(docs/dynamic-motion.md)"))
                 continue
             for (j, g), (t0, t1), here in leap_sequence(c, leaps):
+                if g.takeoff.region is not None:
+                    out.append((("goals", j, "takeoff", "region"), "a take-off is where the character stands: give "
+                                "its position (or nothing); a region is for landings"))
                 if g.takeoff.position is not None:
                     d = ((g.takeoff.position[0] - here[0]) ** 2 + (g.takeoff.position[1] - here[1]) ** 2) ** 0.5
                     if d > LEAP_TAKEOFF_SLACK:

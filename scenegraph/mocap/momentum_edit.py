@@ -218,6 +218,61 @@ def _smooth(d: np.ndarray, sigma: float) -> np.ndarray:
     return np.stack([np.convolve(pad[:, j], k, mode="valid") for j in range(d.shape[1])], axis=1)
 
 
+def _inertia_com(ch: Character, q: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) inertia tensors (kg·m²) of poses q about their centres of mass, world axes."""
+    R, p = numeric_fk(ch, q)
+    m = np.array([b.mass for b in ch.bodies])
+    x = p + np.einsum("tbij,bj->tbi", R, np.array([b.center for b in ch.bodies]))
+    r = x - (np.einsum("b,tbi->ti", m, x) / m.sum())[:, None]
+    Iw = np.einsum("tbij,bjk,tblk->til", R, np.array([b.inertia for b in ch.bodies]), R)
+    rr = np.einsum("tbi,tbi->tb", r, r)
+    return Iw + np.einsum("b,tb->t", m, rr)[:, None, None] * np.eye(3) - np.einsum("b,tbi,tbj->tij", m, r, r)
+
+
+def _rotate_about_com(q: np.ndarray, c: np.ndarray, Rc: np.ndarray) -> np.ndarray:
+    """Poses q (T, 35) rotated by Rc (T, 3, 3) about their centres of mass c (T, 3): the root
+    (Rz(yaw) Ry(pitch) Rx(roll)) and its position; yaw kept continuous with q's."""
+    out = q.copy()
+    cy, sy, cp, sp, cr, sr = (f(q[:, k]) for k in (3, 4, 5) for f in (np.cos, np.sin))
+    Rr = np.empty((len(q), 3, 3))
+    Rr[:, 0] = np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], 1)
+    Rr[:, 1] = np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], 1)
+    Rr[:, 2] = np.stack([-sp, cp * sr, cp * cr], 1)
+    Rn = np.einsum("tij,tjk->tik", Rc, Rr)
+    yaw = np.arctan2(Rn[:, 1, 0], Rn[:, 0, 0])
+    out[:, 3] = yaw + 2 * np.pi * np.round((q[:, 3] - yaw) / (2 * np.pi))
+    out[:, 4] = np.arcsin(np.clip(-Rn[:, 2, 0], -1.0, 1.0))
+    out[:, 5] = np.arctan2(Rn[:, 2, 1], Rn[:, 2, 2])
+    out[:, :3] = c + np.einsum("tij,tj->ti", Rc, q[:, :3] - c)
+    return out
+
+
+def _hold_angular_momentum(ch: Character, q: np.ndarray, a: int, b: int, fps: float, rounds: int = 2) -> np.ndarray:
+    """q with the flight frames [a, b) turned about their centre of mass so that the angular
+    momentum about it is constant: a whole-body angular velocity ω_c = I⁻¹(H̄ − H) is added,
+    with H̄ the I⁻¹-weighted mean of H so that ∫ω_c dt = 0 and the pose at touch-down is
+    (to first order) unchanged; ``rounds`` passes."""
+    out = q.copy()
+    dt = 1.0 / fps
+    for _ in range(rounds):
+        c, _, H, _ = body_momenta(ch, out, fps)
+        Iinv = np.linalg.inv(_inertia_com(ch, out[a:b]))
+        Hf = H[a:b]
+        Hbar = np.linalg.solve(Iinv.sum(axis=0), np.einsum("tij,tj->i", Iinv, Hf))
+        w = np.einsum("tij,tj->ti", Iinv, Hbar - Hf)
+        Rc = np.empty((b - a, 3, 3))
+        R = np.eye(3)
+        for k in range(b - a):  # exp(ω dt) by Rodrigues, integrated from the take-off
+            th = float(np.linalg.norm(w[k])) * dt
+            if th > 1e-12:
+                u = w[k] / np.linalg.norm(w[k])
+                K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+                R = (np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K) @ R
+            Rc[k] = R
+        out[a:b] = _rotate_about_com(out[a:b], c[a:b], Rc)
+    return out
+
+
 def _turn_about(q: np.ndarray, c: np.ndarray, psi: np.ndarray) -> np.ndarray:
     """Poses turned by ψ (T,) about the vertical through c (T, 3)."""
     out = q.copy()
@@ -309,6 +364,7 @@ def momentum_edit(ch: Character, q: np.ndarray, fps: float, longer: float = 0.0,
         out = out + _smooth(_blend_into_flight(fit - out, a, b_new, int(round(BLEND * fps))), SMOOTH * fps)
         cm, _, _, _ = body_momenta(ch, out, fps)
         out[:, :3] += cn - cm
+    out = _hold_angular_momentum(ch, out, a, b_new, fps)
     # measures: how far a planted handle is from its target after the smoothing (m)
     hp = np.asarray(handle_positions_fn(ch, tuple(CONTACT_HANDLES)).map(len(out))(out.T)).reshape(
         3, len(CONTACT_HANDLES), len(out), order="F").transpose(2, 0, 1)

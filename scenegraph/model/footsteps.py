@@ -17,9 +17,9 @@ import numpy as np
 
 from scenegraph.model.body import Character
 
-__all__ = ["leap_footsteps", "leap_flights", "LEAP_HEEL_LIFT", "LEAP_HEEL_DOWN", "HOP_SWAP", "Footstep", "contact_points", "WALK_HEEL", "WALK_BALL", "RUN_BALL", "footsteps_for_walk", "Gait",
+__all__ = ["Footstep", "contact_points", "WALK_HEEL", "WALK_BALL", "RUN_BALL", "footsteps_for_walk", "Gait",
            "GAITS", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH", "foot_length", "gait_footsteps",
-           "walk_footsteps", "standing_footsteps"]
+           "walk_footsteps", "standing_footsteps", "leap_footsteps", "LEAP_HEEL_LIFT", "LEAP_HEEL_DOWN", "HOP_SWAP"]
 
 WALK_HEEL = (0.0, 0.6)   # heel on the ground during this part of the stance
 WALK_BALL = (0.15, 1.0)  # ball on the ground during this part
@@ -27,6 +27,9 @@ RUN_BALL = (0.0, 1.0)
 CADENCE = 1.85          # steps per second of generated walks
 STANCE_FRACTION = 0.62  # stance / stride of generated walks (> 0.5: double support)
 FOOT_WIDTH = 0.18       # m, lateral distance between the feet of every generated footstep plan
+LEAP_HEEL_LIFT = 0.12  # s: before a jump's take-off the heel leaves the ground this long before the ball
+LEAP_HEEL_DOWN = 0.05  # s: at a landing the heel meets the ground this long after the ball
+HOP_SWAP = 0.3  # s: after a hop's landing the other foot comes down this long later (or half the stance)
 
 
 @dataclass(frozen=True)
@@ -231,12 +234,7 @@ def footsteps_for_walk(n_steps: int = 4, step_length: float = 0.7, cadence: floa
     return tuple(steps)
 
 
-# --- jumps and hops (scenegraph/model/leaps.py describes the stages) ---------------------------
-
-LEAP_HEEL_LIFT = 0.12  # s: the heel leaves the ground this long before the take-off (the push-off on the ball)
-LEAP_HEEL_DOWN = 0.05  # s: the heel meets the ground this long after the ball at a landing
-HOP_SWAP = 0.3  # s: after a hop's landing the other foot comes down this long later (or half the stance)
-
+# --- jumps and hops (scenegraph/model/leaps.py: the stages) ---------------------------------------
 
 def _feet(P, heading: float, foot_length: float, foot: str | None) -> dict[str, tuple[float, float]]:
     """Ball positions (x, y) of the feet standing around P (a jump: the feet midpoint; a hop:
@@ -257,13 +255,15 @@ def _feet(P, heading: float, foot_length: float, foot: str | None) -> dict[str, 
     return out
 
 
-def _bounds(region, heading: float, foot_length: float, offset) -> tuple[tuple[float, float], tuple[float, float]]:
+def _bounds(region, offset) -> tuple[tuple[float, float], tuple[float, float]]:
     """Bounds of a ball position whose feet midpoint lies in ``region`` ((x0, y0), (x1, y1))."""
     (x0, y0), (x1, y1) = region
     return ((x0 + offset[0], y0 + offset[1]), (x1 + offset[0], y1 + offset[1]))
 
 
-def _stance(foot, P, heading, t0, t1, *, lift: bool, land: bool, free=False, bounds=None, ball_xy=None):
+def _stance(foot, heading, t0, t1, *, lift: bool, land: bool, free=False, bounds=None, ball_xy=None):
+    """One leap stance: heel down LEAP_HEEL_DOWN after the ball at a landing, up LEAP_HEEL_LIFT
+    before a take-off."""
     span = t1 - t0
     a = min(LEAP_HEEL_DOWN / span, 0.3) if land else 0.0
     b = 1.0 - min(LEAP_HEEL_LIFT / span, 0.4) if lift else 1.0
@@ -280,6 +280,8 @@ def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep
     seq = list(leaps) + [None]
     for k, lp in enumerate(seq):
         t_end = lp.t_off if lp is not None else T
+        if lp is not None:  # the take-off stance: where the leap's take-off says (default: where it stands)
+            P = lp.takeoff
         feet_next = ("l", "r") if lp is None or lp.foot is None else (lp.foot,)
         down = ("l", "r") if prev_foot is None else (prev_foot,)
         balls = _feet(P, h, foot_length, prev_foot)
@@ -297,8 +299,8 @@ def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep
             bounds = None
             if prev_region is not None:
                 mid = np.asarray(balls[f]) - np.asarray(P)
-                bounds = _bounds(prev_region, h, foot_length, mid)
-            steps.append(_stance(f, P, h, on_from, off_at, lift=lp is not None and f in feet_next,
+                bounds = _bounds(prev_region, mid)
+            steps.append(_stance(f, h, on_from, off_at, lift=lp is not None and f in feet_next,
                                  land=k > 0 and f in down, free=bounds is not None, bounds=bounds,
                                  ball_xy=balls[f]))
         if lp is None:
@@ -307,8 +309,3 @@ def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep
         t_prev, prev_foot, prev_region = lp.t_land, lp.foot, lp.landing_region
     steps.sort(key=lambda f: (f.t0, f.foot))
     return tuple(steps)
-
-
-def leap_flights(leaps) -> tuple[tuple[float, float], ...]:
-    """(take-off, landing) world seconds of each leap."""
-    return tuple((float(lp.t_off), float(lp.t_land)) for lp in leaps)

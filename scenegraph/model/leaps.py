@@ -7,11 +7,11 @@ residual zero there, so the centre of mass falls with g and the angular momentum
 is constant), and a ground stage after the landing.  This module turns the leaps into
 
 * footsteps (:func:`scenegraph.model.footsteps.leap_footsteps`, the one footstep generator):
-  both feet (a jump) or one foot (a hop) planted at the take-off until the take-off time, the
-  heel lifting LEAP_HEEL_LIFT before it; planted at the landing from the landing time, ball
-  first, heel LEAP_HEEL_DOWN later.  A region instead of a
+  both feet (a jump) or one foot (a hop) planted at the
+  take-off until the take-off time, the heel lifting 0.12 s before it; planted at the
+  landing from the landing time, ball first, heel 0.05 s later.  A region instead of a
   position gives a free footprint bounded by it (``Footstep.bounds``);
-* flights (:func:`scenegraph.model.footsteps.leap_flights`): (take-off, landing) world seconds;
+* flights (:func:`leap_flights`): (take-off, landing) world seconds;
 * an initial motion (:func:`leap_motion`): a countermovement dip before the take-off, a
   ballistic pelvis parabola in flight (vertical speed g·t_f/2 at take-off), a landing dip,
   the heading turning through the flight, arms swinging back in the dip and forward at the
@@ -21,16 +21,23 @@ Units: m, s, rad; world frame z up, headings from +X counter-clockwise.
 """
 from __future__ import annotations
 
+
 import numpy as np
 
 from scenegraph.model.body import N_DOF, Character, standing_pose
+from scenegraph.model.footsteps import leap_footsteps
 from scenegraph.model.motion import Motion
 
-__all__ = ["leap_motion", "DIP"]
+__all__ = ["leap_footsteps", "leap_flights", "leap_motion", "DIP"]
 
 DIP = 0.14  # m: pelvis drop of the countermovement and the landing absorption of a jump (CMU 16_05: 0.13)
 G = 9.81
 D = np.deg2rad
+
+
+def leap_flights(leaps) -> tuple[tuple[float, float], ...]:
+    """(take-off, landing) world seconds of each leap."""
+    return tuple((float(lp.t_off), float(lp.t_land)) for lp in leaps)
 
 
 def _hermite(t, knots):
@@ -68,6 +75,7 @@ def leap_motion(ch: Character, leaps, start, T: float, ctrl_per_second: float = 
     tuck = np.zeros(len(t))
     P, h = np.array(start[:2], float), float(start[2])
     for lp in leaps:
+        P = np.asarray(lp.takeoff, float)
         tf = lp.t_land - lp.t_off
         dip = DIP if lp.foot is None else DIP / 2
         ramp = 0.3

@@ -59,6 +59,8 @@ def test_bad_jumps_are_rejected_at_their_field():
     _bad("  - {type: jump, character: a, landing: {position: [1, 0], region: {min: [0, 0], max: [1, 1]}}}\n",
          "goals[0].landing.region", "not both")
     _bad("  - {type: hop, character: a, landing: {position: [1, 0]}}\n", "goals[0].foot", "")
+    _bad("  - {type: jump, character: a, takeoff: {region: {min: [0, 0], max: [1, 1]}}, landing: {position: [1, 0]}}\n",
+         "goals[0].takeoff.region", "a region is for landings")
     _bad(JUMP + "  - {type: walk_to, character: a, target: [1, 1], time: 1.9}\n", "goals[1].type", "cannot be combined")
     _bad("  - {type: keyframes, character: a, keys: [{time: 0.5, joints: {knee_flx_l: 40}}]}\n",
          "goals[0].keys[0].joints", "knee_flex_l")
@@ -108,6 +110,10 @@ def test_turn_free_timing_region_hop_obstacle_and_keyframes_change_what_is_solve
     turned = build_scene(_scn(JUMP + "    turn_deg: 90\n")).character("a").footsteps
     assert [f.heading for f in base if f.t0 > 1] == [0.0, 0.0]
     assert [round(f.heading, 6) for f in turned if f.t0 > 1] == [round(math.pi / 2, 6)] * 2
+    # a take-off position (within 0.3 m of the start) moves the take-off footprints
+    moved = build_scene(_scn(JUMP.replace("takeoff: {time: 0.8}", "takeoff: {position: [0.2, 0.0], time: 0.8}")))
+    off = [f.position[0] for f in moved.character("a").footsteps if f.t1 <= 0.8 + 1e-9]
+    assert off and all(abs(x - y - 0.2) < 1e-9 for x, y in zip(off, [f.position[0] for f in base if f.t1 <= 0.8 + 1e-9]))
     # free timing: nominal flight from the distance (√(2 d / g)), take-off 0.7 s after the start
     free = build_scene(_scn("  - {type: jump, character: a, landing: {position: [1.2, 0.0]}}\n"))
     g = free.goal("jump_0")

@@ -66,7 +66,8 @@ class Jump(GoalRecord):
         def reg(end):
             return None if end.region is None else (tuple(end.region.min), tuple(end.region.max))
         return cls(name=name, character=g.character, time=float(t1), tolerance=float(g.tolerance),
-                   where=where_of(scn, ("goals", j), name), takeoff=tuple(here), landing=g.landing.centre(),
+                   where=where_of(scn, ("goals", j), name), takeoff=g.takeoff.centre() or tuple(here),
+                   landing=g.landing.centre(),
                    t_off=float(t0), t_land=float(t1), heading=heading, turn=math.radians(g.turn_deg),
                    foot=getattr(g, "foot", None), takeoff_region=reg(g.takeoff), landing_region=reg(g.landing),
                    obstacle_height=g.obstacle_height)
