@@ -21,7 +21,6 @@ offending field's line and column.  Checks that need to know where the scenario 
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
 

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from scenegraph.model.body import N_DOF, N_ROOT, Character
+from scenegraph.model.body import N_DOF, Character
 from scenegraph.model.kinematics import handle_positions_fn, numeric_fk
 from scenegraph.model.residual import CONTACT_HANDLES
 

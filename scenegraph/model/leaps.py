@@ -73,7 +73,7 @@ def leap_motion(ch: Character, leaps, start, T: float, ctrl_per_second: float = 
     crouch = np.zeros(len(t))  # 0 standing … 1 deepest dip
     swing = np.zeros(len(t))  # arm swing: −1 back … +1 forward
     tuck = np.zeros(len(t))
-    P, h = np.array(start[:2], float), float(start[2])
+    P = np.array(start[:2], float)
     for lp in leaps:
         P = np.asarray(lp.takeoff, float)
         tf = lp.t_land - lp.t_off
@@ -100,7 +100,7 @@ def leap_motion(ch: Character, leaps, start, T: float, ctrl_per_second: float = 
                       [0.0, -1.0, 1.0, 0.6, 0.3, 0.0])
         swing += w
         tuck += np.interp(t, [lp.t_off, (lp.t_off + lp.t_land) / 2, lp.t_land], [0.0, 1.0, 0.0])
-        P, h = Q, lp.heading + lp.turn
+        P = Q
     hops = {lp.foot for lp in leaps if lp.foot is not None}
     for side in ("l", "r"):
         idx = ch.dof_index

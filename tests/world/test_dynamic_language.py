@@ -39,7 +39,7 @@ def _bad(goals: str, field: str, words: str):
     with pytest.raises(InputError) as e:
         _scn(goals)
     msg = str(e.value)
-    assert f"j.yaml:" in msg and field in msg and words in msg, msg
+    assert "j.yaml:" in msg and field in msg and words in msg, msg
 
 
 JUMP = """  - type: jump

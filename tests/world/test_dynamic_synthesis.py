@@ -14,7 +14,6 @@ Each run takes minutes (slow).
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest

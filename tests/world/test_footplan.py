@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 
 from scenarios.loader import parse_scenario
 from scenegraph.world.footplan import RANK_CHASE, RANK_FOOTPRINTS, RANK_LEAP, RANK_WALK, RANK_WALK_AHEAD
