@@ -214,7 +214,8 @@ def test_scene_units_and_edits():
     import math
 
     from scenarios.loader import load_scenario
-    from scenegraph.world.scene import build_scene, walk_footsteps
+    from scenegraph.model.footsteps import walk_footsteps
+    from scenegraph.world.scene import build_scene
 
     scene = build_scene(load_scenario("tackle"))
     assert scene.character("dodger").start[2] == pytest.approx(math.pi / 2)

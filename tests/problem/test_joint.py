@@ -9,7 +9,7 @@ from scenegraph.model.body import make_character
 from scenegraph.model.gait import initial_motion
 from scenegraph.problem.joint import JointCoupling, coupling_times, solve_joint
 from scenegraph.model.kinematics import handle_positions_fn
-from scenegraph.world.scene import _foot_length, standing_footsteps
+from scenegraph.model.footsteps import foot_length as _foot_length, standing_footsteps
 from scenegraph.problem import HandleTarget, Subproblem
 from scenegraph.model.style import default_style
 from scenegraph.problem.synthesis import presolve_kinematics
