@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -53,6 +54,7 @@ def run_variant(vdir: str, fps: float, fail_capped: bool, store: str | None, res
 
     v = Path(vdir)
     t0 = time.perf_counter()
+    where = {"pid": os.getpid(), "started": time.time()}  # when and where it ran (load-balance traces)
     with append_log(v / "log.txt") as log:
         try:
             rep = run_scenario(str(v / "scenario.yaml"), out=str(v / "stage.usda"), report=str(v / "report.json"),
@@ -61,8 +63,10 @@ def run_variant(vdir: str, fps: float, fail_capped: bool, store: str | None, res
                                scheduler="sync" if store else None, store=store, log=log)
         except ComposeError as exc:
             print(f"compose: error: {exc}", file=log)
-            return {"error": str(exc), "exit_code": exc.exit_code, "seconds": time.perf_counter() - t0}
-    return {"report": rep, "exit_code": 0 if rep["passes"] else 1}
+            return {"error": str(exc), "exit_code": exc.exit_code, "seconds": time.perf_counter() - t0,
+                    **where, "ended": time.time()}
+    return {"report": rep, "exit_code": 0 if rep["passes"] else 1, "seconds": time.perf_counter() - t0,
+            **where, "ended": time.time()}
 
 
 def _check_dir(out: Path, meta: dict, resume: bool) -> None:

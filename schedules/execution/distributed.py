@@ -14,9 +14,11 @@ Schedulers (``--jobs N``: the number of local worker processes):
   cluster's workers inherit this process's environment for that reason.  An unreachable scheduler is an
   :class:`~scenarios.errors.InputError` (exit 2) raised before anything is written.
 
-The schedule becomes a Dask task graph (:mod:`schedules.execution.graph_tasks`); the driver (this
-process) collects results as tasks finish (Dask's completion events: ``as_completed`` on
-a cluster, scheduler callbacks otherwise), prints the progress and ETA lines of the
+The schedule becomes a Dask task graph (:mod:`schedules.execution.graph_tasks`); on a
+``distributed`` cluster the driver (this process) hands it over one free worker thread at a
+time (:mod:`schedules.execution.dispatch`: Dask cannot estimate how long a compose task
+runs and would otherwise place them all up front), collects results as tasks finish
+(``as_completed`` on a cluster, scheduler callbacks otherwise), prints the progress and ETA lines of the
 plain executor, writes each result to the run folder as a checkpoint (same files and
 names: ``--resume`` works across schedulers), and assembles the final Scene by applying
 every result in the schedule's order.  A worker that dies mid-step loses its task; the
@@ -34,6 +36,7 @@ from pathlib import Path
 from scenarios.errors import InputError, Location
 
 from schedules.execution.checkpoints import RunLock, write_checkpoint
+from schedules.execution.dispatch import dispatch
 from schedules.execution.executor import (RunResult, StepFailed, _fmt_s, _record, _resumed, _resumed_step, kept_warning,
                                          prepare_run_dir)
 from schedules.execution.graph_tasks import apply_results, presolve_task_key, schedule_graph, step_task_key
@@ -88,15 +91,7 @@ class DaskScheduler:
         """Run ``dsk`` for ``keys``; ``on_done(key, result)`` is called in this process as
         each key finishes (completion order).  Exceptions of ``on_done`` stop the run."""
         if self.client is not None:
-            from distributed import as_completed
-
-            futures = self.client.get(dsk, keys, sync=False)
-            by_future = dict(zip(futures, keys))
-            try:
-                for fut in as_completed(futures):
-                    on_done(by_future[fut], fut.result())
-            finally:
-                self.client.cancel(futures)
+            dispatch(self.client, dsk, keys, on_done)  # one task per free worker thread (see dispatch)
             return
         import dask
         from dask.callbacks import Callback
