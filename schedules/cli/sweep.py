@@ -136,7 +136,8 @@ def run_sweep(file: str, varies: list[str], out: str, *, scheduler: str | None =
             v = variants[i]
             what = (("passes" if o["report"]["passes"] else "fails") if "report" in o
                     else f"error: {o['error'].splitlines()[0]}")
-            print(f"compose: sweep [{len(outcomes)}/{len(variants)}] variant {i} ({v.label}): {what}; "
+            took = f" in {o['seconds']:.0f} s (process {o['pid']})" if "seconds" in o and "pid" in o else ""
+            print(f"compose: sweep [{len(outcomes)}/{len(variants)}] variant {i} ({v.label}): {what}{took}; "
                   f"elapsed {time.perf_counter() - t0:.0f} s", file=log, flush=True)
 
         args = {v.index: (str(out_dir / f"v{v.index:03d}"), fps, fail_capped, store, resume) for v in todo}
