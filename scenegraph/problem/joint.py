@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
+from scenegraph.model.clearance import sphere_centers_fn
 from scenegraph.model.motion import basis
 from scenegraph.problem import (NLP, Result, SolveTiming, Spring, Subproblem, create_nlpsol, read_solution, solver_options,
                       transcribe, violations)
@@ -80,6 +81,7 @@ class JointBuilt:
     monitor: object
     seconds_build: float
     callback: object = None  # the iteration callback in use (the monitor, or one from nlpsol_options)
+    clear_fn: object = None  # joint x -> the bodies-apart rows between the two (≥ 0 when met), or None
 
 
 @dataclass
@@ -135,10 +137,39 @@ def _handle_fn(b: NLP, handle: str, s: np.ndarray) -> ca.Function:
     return ca.Function("handle", [xs], [hk.map(len(s))(Q)])
 
 
-def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> JointBuilt:
+def _split_clearance(sp_a: Subproblem, sp_b: Subproblem, names: tuple[str, str] | None):
+    """(sp_a, sp_b, cross): each subproblem without its clearance rows against the other (held
+    at the other's start-of-step motion, which moves in a joint solve), and a's such rows, to be
+    enforced between the two moving characters (:mod:`scenegraph.model.clearance`)."""
+    if names is None:
+        return sp_a, sp_b, ()
+
+    def against(c, who: str) -> bool:
+        return c.other.split("/", 1)[0] == who
+
+    cross = tuple(c for c in sp_a.clearance if against(c, names[1]) and c.other_sphere >= 0)
+    return (replace(sp_a, clearance=tuple(c for c in sp_a.clearance if not against(c, names[1]))),
+            replace(sp_b, clearance=tuple(c for c in sp_b.clearance if not against(c, names[0]))), cross)
+
+
+def _spheres_fn(b: NLP, s: np.ndarray) -> ca.Function:
+    """x -> body sphere centres (3·n_spheres × len(s), world m) at canonical times s (SX)."""
+    sp = b.sp
+    xs = ca.SX.sym("x", b.x0.size)
+    Q = ca.mtimes(ca.DM(basis(sp.motion.n_ctrl, s, 0)), b.ctrl_fn(xs, b.p0)).T  # (35, n)
+    return ca.Function("spheres", [xs], [sphere_centers_fn(sp.character).map(len(s))(Q)])
+
+
+def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
+                names: tuple[str, str] | None = None) -> JointBuilt:
     """Transcribe both subproblems (each with a stand-in spring on its coupled handle) and
-    combine them into one IPOPT NLP with the hard coupling; see the module docstring."""
+    combine them into one IPOPT NLP with the hard coupling; see the module docstring.
+
+    ``names`` (the characters' names): a's clearance rows against b become rows between the two
+    moving characters, ‖c_i^a(t) − c_j^b(t)‖² ≥ (R_i + R_j)² (m²), and b's against a are dropped
+    (the same pairs); without it each keeps its rows against the other's start-of-step motion."""
     t0 = _time.perf_counter()
+    sp_a, sp_b, cross = _split_clearance(sp_a, sp_b, names)
     tc = np.asarray(coupling.times, float)
     nc = len(tc)
     bs = (transcribe(_with_stand_in_spring(sp_a, coupling.handle_a, tc)),
@@ -172,10 +203,18 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> 
     # constraints: each character's own, then the coupling (handle_a − handle_b at tc)
     gap = ca.vec(handle_c[0] - handle_c[1])
     ga, gb = bs[0].g_fn(xas, bs[0].p0), bs[1].g_fn(xbs, bs[1].p0)
-    gs = ca.vertcat(ga, gb, gap)
+    rows = []
+    if cross:  # bodies apart, both moving
+        tcl = np.array(sorted({c.t for c in cross}))
+        col = {float(t): k for k, t in enumerate(tcl)}
+        Ca = _spheres_fn(bs[0], bs[0].sp.motion.to_canonical(tcl))(xas)
+        Cb = _spheres_fn(bs[1], bs[1].sp.motion.to_canonical(tcl))(xbs)
+        rows = [ca.sumsqr(Ca[3 * c.sphere:3 * c.sphere + 3, col[c.t]]
+                          - Cb[3 * c.other_sphere:3 * c.other_sphere + 3, col[c.t]]) - c.radius ** 2 for c in cross]
+    gs = ca.vertcat(ga, gb, gap, *rows)
     ng_a, ng_b = bs[0].lbg.size, bs[1].lbg.size
-    lbg = np.concatenate([bs[0].lbg, bs[1].lbg, np.zeros(nf)])
-    ubg = np.concatenate([bs[0].ubg, bs[1].ubg, np.zeros(nf)])
+    lbg = np.concatenate([bs[0].lbg, bs[1].lbg, np.zeros(nf), np.zeros(len(rows))])
+    ubg = np.concatenate([bs[0].ubg, bs[1].ubg, np.zeros(nf), np.full(len(rows), np.inf)])
     g = ca.Function("g_joint", [Xs], [gs])(X)
 
     # Hessian as in problem.transcribe: Gauss–Newton objective + exact constraint Hessian
@@ -204,7 +243,8 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling) -> 
                       (slice(0, na), slice(na, na + nb), slice(na + nb, na + nb + nf)),
                       (slice(0, ng_a), slice(ng_a, ng_a + ng_b), slice(ng_a + ng_b, ng_a + ng_b + nf)),
                       ca.Function("p_of", [X], [pa, pb]),
-                      ca.Function("palms", [Xs], handle_c), monitor, _time.perf_counter() - t0, callback)
+                      ca.Function("palms", [Xs], handle_c), monitor, _time.perf_counter() - t0, callback,
+                      ca.Function("clear", [Xs], [ca.vertcat(*rows)]) if rows else None)
 
 
 def _character_result(b: NLP, x: np.ndarray, p: np.ndarray, status: str, ok: bool, iterations: int,
@@ -216,10 +256,11 @@ def _character_result(b: NLP, x: np.ndarray, p: np.ndarray, status: str, ok: boo
 
 
 def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
-                built: JointBuilt | None = None) -> JointResult:
-    """Build (unless given) and solve the joint NLP, warm-started from both subproblems' motions."""
+                built: JointBuilt | None = None, names: tuple[str, str] | None = None) -> JointResult:
+    """Build (unless given) and solve the joint NLP, warm-started from both subproblems' motions
+    (``names``: see :func:`build_joint`)."""
     t0 = _time.perf_counter()
-    jb = built or build_joint(sp_a, sp_b, coupling)
+    jb = built or build_joint(sp_a, sp_b, coupling, names)
     t1 = _time.perf_counter()
     if jb.monitor is not None and hasattr(jb.monitor, "reset"):
         jb.monitor.reset()
@@ -252,6 +293,8 @@ def solve_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
         for k, v in r.violations.items():
             viol[k] = max(viol.get(k, 0.0), v)
     viol["coupling"] = float(np.abs(ha - hb).max())
+    if jb.clear_fn is not None:  # squared-distance rows (m²): how far inside the summed radii
+        viol["clearance"] = max(viol.get("clearance", 0.0), float(max(0.0, -np.min(np.asarray(jb.clear_fn(x))))))
     force = F_SCALE * x[jb.slices[2]].reshape(-1, 3)  # column-major (3, nc) -> rows per time
     return JointResult(res, np.asarray(coupling.times, float), force, status, ok, iters, seconds,
                        jb.seconds_build if built is None else 0.0, t2 - t1, f_final, gap, viol, timing)

@@ -121,6 +121,10 @@ class Subproblem:
     cyclic: bool = False
     contact_guess: dict | None = field(default=None, compare=False, hash=False)  # warm start for λ
     min_foot_separation: float = 0.06
+    clearance: tuple = ()  # scenegraph.model.clearance.BodyClearance: this character's body spheres kept
+    # off other characters' (held) bodies at given times
+    clearance_weight: float = 0.0  # 0: clearance as hard rows; > 0: one-sided least squares of the depth
+    # (m) inside the summed radii, this total weight shared by the rows
     ground: Ground = FLAT  # terrain: footprint heights, non-penetration, friction pyramids (ground.py)
     max_iter: int = 300
     tol: float = 1e-4

@@ -44,6 +44,7 @@ import casadi as ca
 import numpy as np
 
 from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, Character
+from scenegraph.model.clearance import sphere_centers_fn
 from scenegraph.model.footsteps import Footstep, contact_points
 from scenegraph.model.motion import basis
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
@@ -115,6 +116,28 @@ def _sparse(a: np.ndarray) -> ca.DM:
     a = np.asarray(a, float)
     a = np.where(np.abs(a) < 1e-14, 0.0, a)
     return ca.sparsify(ca.DM(a))
+
+
+def _clearance_terms(sp: Subproblem, P, to_canonical, mask, warp_free):
+    """Bodies apart (``sp.clearance``, :mod:`scenegraph.model.clearance`) at the clearance times
+    the free control points reach: (one-sided depths inside the summed radii (m), or None;
+    squared-distance rows ``‖c − center‖² − R²`` ≥ 0 (m²), or None) — the depths when
+    ``sp.clearance_weight`` > 0 (a least-squares term), else the rows (hard)."""
+    K = sp.motion.n_ctrl
+    t_c = np.array(sorted({c.t for c in sp.clearance}))
+    s_c = to_canonical(t_c)
+    live_c = _depend_on_free(K, s_c, mask, warp_free)
+    if not live_c.any():
+        return None, None
+    SC = sphere_centers_fn(sp.character).map(int(live_c.sum()))(ca.mtimes(_sparse(basis(K, s_c[live_c], 0)), P).T)
+    col = {float(t): k for k, t in enumerate(t_c[live_c])}
+    live = [c for c in sp.clearance if c.t in col]
+    if not live:
+        return None, None
+    d = [SC[3 * c.sphere:3 * c.sphere + 3, col[c.t]] - ca.DM(c.center) for c in live]
+    if sp.clearance_weight > 0:
+        return ca.vertcat(*[ca.fmin(ca.norm_2(v) - c.radius, 0.0) for v, c in zip(d, live)]), None
+    return None, ca.vertcat(*[ca.sumsqr(v) - c.radius ** 2 for v, c in zip(d, live)])
 
 
 def window_mask(sp: Subproblem, n_ctrl: int) -> np.ndarray:
@@ -436,6 +459,12 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         i = hk_names.index(a.handle)
         d = hk(q_t)[3 * i:3 * i + 3] - ca.DM(a.center)
         add(f"avoid:{a.handle}", ca.sumsqr(d) - a.radius ** 2, 0.0, np.inf, "ineq")
+    if sp.clearance:  # bodies apart: sphere i of this character off another's held point
+        depth, rows = _clearance_terms(sp, P, m.to_canonical, mask, warp_free)
+        if depth is not None:
+            rho_extra.append(np.sqrt(sp.clearance_weight / depth.shape[0]) * depth)
+        if rows is not None:
+            add("clearance", rows, 0.0, np.inf, "ineq")
 
     # footsteps: planted handles at their footprint on the ground
     if pins:

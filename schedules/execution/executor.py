@@ -184,7 +184,7 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
         (a, b), sps = joint.characters, {}
         for who in joint.characters:
             sps[who] = lower(cur, step, who, max_iter=_max_iter(iteration_cap(step)))
-        jr = solve_joint(sps[a][0], sps[b][0], joint.coupling)
+        jr = solve_joint(sps[a][0], sps[b][0], joint.coupling, names=(a, b))  # bodies apart between the two
         interrupts.check()
         for who, res in zip((a, b), jr.results):
             res = replace(res, violations={**res.violations, f"coupling:{joint.coupling.name}":

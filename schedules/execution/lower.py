@@ -19,6 +19,12 @@ and :func:`check_step` rejects a Step with anything this module does not handle.
   ``goal:<name>`` (springs of exactly this weight, or hard targets), ``coupling:<name>``
   (a rubber band of this stiffness in N/m, or ``hard``: a joint solve).
 
+Not a term but a fact of the scene: in a ``full`` Step of a scene with several characters,
+the character's bodies are kept off the others' (:mod:`scenegraph.world.clearance`: body
+spheres where the current motions come within 10 cm, as a one-sided least-squares term of
+total weight ``CLEARANCE_WEIGHT``; between the two characters of a joint solve, hard rows),
+except the contacts the scene asks for.
+
 Times: a Step's window is in canonical seconds; the Subproblem's in world seconds of the
 character's current motion.
 """
@@ -29,9 +35,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from scenarios.errors import ComposeError
+from scenegraph.model.clearance import CLEARANCE_WEIGHT
 from scenegraph.problem.joint import JointCoupling, coupling_times
 from scenegraph.model.motion import Motion
 from scenegraph.problem import HandleTarget, PoseTarget, Subproblem, window_mask
+from scenegraph.world.clearance import scene_clearance
 from scenegraph.world.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.model.style import Style
 
@@ -169,7 +177,11 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
                     # a dense grid too, as synthesize does for runs — between the 30 Hz points a
                     # toe dipped 11–15 mm (audit gate 10 mm)
-                    soft_ground_hz=SOFT_PIN_HZ if step.kind == FULL and step.role == "horizon" else 0.0)
+                    soft_ground_hz=SOFT_PIN_HZ if step.kind == FULL and step.role == "horizon" else 0.0,
+                    # bodies apart: in full steps, this character's body spheres off every other
+                    # character's (held at its current motion) where they come close
+                    clearance=scene_clearance(scene, who, win) if step.kind == FULL and len(scene.characters) > 1
+                    else (), clearance_weight=CLEARANCE_WEIGHT)
     mask = None if whole else window_mask(sp, m.n_ctrl)
     return sp, mask
 

@@ -103,6 +103,11 @@ class GoalRecord:
         target), exempt from the bodies-apart checks; None (the default) for the rest."""
         return None
 
+    def touches_from(self) -> float:
+        """World time (s) from which the bodies of :meth:`touches` may meet; before it they
+        are kept apart like anybody's (default: from the start)."""
+        return float("-inf")
+
     def gait_change(self, who: str) -> tuple[float, float, str] | None:
         """(time s, blend s, gait) when this goal changes ``who``'s gait (default: None)."""
         return None

@@ -39,6 +39,9 @@ def adversarial(g, entry: dict) -> dict:
     return entry
 
 
+TOUCH_LEAD = 0.15  # s: a tackler's and its target's bodies may meet from this long before the hit
+
+
 @dataclass(frozen=True, kw_only=True)
 class Tackle(AdversarialGoal):
     """min_speed, speed: m/s (closing speed; ``speed`` None: at least min_speed); hands_around_torso."""
@@ -60,6 +63,10 @@ class Tackle(AdversarialGoal):
 
     def touches(self) -> tuple[str, str]:
         return (self.character, self.partner)
+
+    def touches_from(self) -> float:
+        """The approach is kept apart until TOUCH_LEAD before the hit."""
+        return self.time - TOUCH_LEAD
 
     def step_rank(self, who: str) -> int | None:
         """The attacker's run (2); the target walks straight ahead unless it walks (3)."""
