@@ -37,6 +37,7 @@ from scenegraph.model.motion import basis
 from scenegraph.problem import (NLP, Result, SolveTiming, Spring, Subproblem, create_nlpsol, read_solution, solver_options,
                       transcribe, violations)
 from scenegraph.model.residual import handles_kernel
+from scenegraph.problem.transcription import sphere_pick
 
 __all__ = ["JointCoupling", "JointResult", "build_joint", "solve_joint", "coupling_times", "F_SCALE",
            "JOINT_SPRING_K"]
@@ -209,12 +210,14 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
         col = {float(t): k for k, t in enumerate(tcl)}
         Ca = _spheres_fn(bs[0], bs[0].sp.motion.to_canonical(tcl))(xas)
         Cb = _spheres_fn(bs[1], bs[1].sp.motion.to_canonical(tcl))(xbs)
-        rows = [ca.sumsqr(Ca[3 * c.sphere:3 * c.sphere + 3, col[c.t]]
-                          - Cb[3 * c.other_sphere:3 * c.other_sphere + 3, col[c.t]]) - c.radius ** 2 for c in cross]
+        mine = sphere_pick(cross, col, Ca.shape) @ ca.vec(Ca)
+        theirs = sphere_pick([replace(c, sphere=c.other_sphere) for c in cross], col, Cb.shape) @ ca.vec(Cb)
+        d = ca.reshape(mine - theirs, 3, len(cross))
+        rows = [ca.sum1(d * d).T - ca.DM([c.radius ** 2 for c in cross])]
     gs = ca.vertcat(ga, gb, gap, *rows)
     ng_a, ng_b = bs[0].lbg.size, bs[1].lbg.size
-    lbg = np.concatenate([bs[0].lbg, bs[1].lbg, np.zeros(nf), np.zeros(len(rows))])
-    ubg = np.concatenate([bs[0].ubg, bs[1].ubg, np.zeros(nf), np.full(len(rows), np.inf)])
+    lbg = np.concatenate([bs[0].lbg, bs[1].lbg, np.zeros(nf), np.zeros(len(cross))])
+    ubg = np.concatenate([bs[0].ubg, bs[1].ubg, np.zeros(nf), np.full(len(cross), np.inf)])
     g = ca.Function("g_joint", [Xs], [gs])(X)
 
     # Hessian as in problem.transcribe: Gauss–Newton objective + exact constraint Hessian
