@@ -39,7 +39,7 @@ from scenegraph.nio.counterexamples import WARM_START, nlp_params
 from scenegraph.nio.heldout import JOINT_GROUPS, group_indices
 from scenegraph.nio.theta import ALPHA, KERNEL, N_THETA_FULL
 
-__all__ = ["KKTPoint", "solve_kkt", "polish", "Polished", "perturbed_params", "theta_difference", "kkt_sensitivity", "Sensitivity", "typical_change", "group_sensitivity",
+__all__ = ["KKTPoint", "solve_kkt", "perturbed_params", "theta_difference", "kkt_sensitivity", "Sensitivity", "typical_change", "group_sensitivity",
            "THETA_FIELDS", "linear_response_deg", "sensitivity_report"]
 
 THETA_FIELDS = ("alpha", "ks1", "ks2", "kd", "q_rest", "k_shoe", "h_rest")
@@ -144,6 +144,8 @@ class Sensitivity:
     kkt_residual: float  # relative residual of the KKT solve
     stationarity: float  # |∇f + Jᵀλ_g + λ_x|_∞ at the point (how converged it is)
     reduced_hessian: dict | None  # eigenvalues of Zᵀ H Z (flatness), when asked for
+    active_rows: np.ndarray | None = None  # indices into g of the active constraints
+    fixed_x: np.ndarray | None = None  # indices into x of the active bounds
 
 
 def _active(nlp: NLP, x: np.ndarray, gv: np.ndarray, act_tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -156,100 +158,6 @@ def _active(nlp: NLP, x: np.ndarray, gv: np.ndarray, act_tol: float) -> tuple[np
     near = (np.abs(gv - nlp.lbg) <= act_tol) | (np.abs(gv - nlp.ubg) <= act_tol)
     fixed = (nlp.lbx == nlp.ubx) | (np.abs(x - nlp.lbx) <= act_tol) | (np.abs(x - nlp.ubx) <= act_tol)
     return np.flatnonzero(eq | near), np.flatnonzero(fixed)
-
-
-@dataclass(frozen=True)
-class Polished:
-    """A KKT point refined by Newton's method on the active set's KKT equations."""
-
-    x: np.ndarray
-    lam_g: np.ndarray  # least-squares / Newton multipliers of g (zero off the active set)
-    stationarity: list  # |∇f + Aᵀμ|_∞ before and after each Newton step
-    violation: float  # worst violation of the active constraints afterwards (their units)
-    inactive_ok: bool  # the inactive inequalities and bounds still hold
-    iterations: int
-
-
-def _pieces(nlp: NLP, x: np.ndarray, p: np.ndarray, grad):
-    import scipy.sparse as sps
-
-    gv, Jg = nlp.jac_g(x, p)
-    return (np.asarray(gv, float).ravel(), sps.csr_matrix(Jg.sparse()), np.asarray(grad(x, p), float).ravel())
-
-
-def _targets(nlp: NLP, gv: np.ndarray, rows: np.ndarray, x: np.ndarray, fixed: np.ndarray):
-    """The value each active row and bound is held at (the nearer limit)."""
-    lo, hi = nlp.lbg[rows], nlp.ubg[rows]
-    tg = np.where(np.abs(gv[rows] - lo) <= np.abs(gv[rows] - hi), lo, hi)
-    xl, xu = nlp.lbx[fixed], nlp.ubx[fixed]
-    tx = np.where(np.abs(x[fixed] - xl) <= np.abs(x[fixed] - xu), xl, xu)
-    return tg, tx
-
-
-def polish(nlp: NLP, x: np.ndarray, p: np.ndarray, *, act_tol: float = 1e-4, iters: int = 30,
-           tol: float = 1e-9, active=None) -> Polished:
-    """Newton's method on the KKT equations of ``nlp`` with the active set of ``x`` held
-    (:func:`_active`, or ``active`` = (rows, bounds)): ∇f + Aᵀμ = 0, the active rows and bounds at
-    their limits.  Each step solves [H(μ) Aᵀ; A 0] [dx; μ⁺] = [−∇f; −c] (the exact Lagrangian
-    Hessian of ``nlp``), halving the step until |∇f + Aᵀμ|_∞ + |c|_∞ decreases.  Used to make an
-    IPOPT point an actual KKT point before differentiating it, and to re-solve a perturbed θ
-    (the test's finite differences)."""
-    import casadi as ca
-    import scipy.sparse as sps
-    import scipy.sparse.linalg as spla
-
-    grad = ca.Function("grad_f", [nlp.x, nlp.p], [ca.gradient(nlp.f, nlp.x)])
-    x = np.asarray(x, float).copy()
-    n = x.size
-    gv, Jg, gf = _pieces(nlp, x, p, grad)
-    rows, fixed = _active(nlp, x, gv, act_tol) if active is None else active
-    tg, tx = _targets(nlp, gv, rows, x, fixed)
-    pin = sps.csr_matrix((np.ones(fixed.size), (np.arange(fixed.size), fixed)), shape=(fixed.size, n))
-
-    def state(xv):
-        """(g, A, ∇f, c, μ, error) at xv, μ the least-squares (minimum-norm) multipliers: the
-        footstep rows are linearly dependent, and multipliers in the null space of Aᵀ (what a
-        regularised KKT solve returns) swing the stationarity residual by orders of magnitude
-        when A changes."""
-        g_, J_, f_ = _pieces(nlp, xv, p, grad)
-        A_ = sps.vstack([J_[rows], pin]).tocsc()
-        c_ = np.r_[g_[rows] - tg, xv[fixed] - tx]
-        mu_ = spla.lsqr(A_.T, -f_, atol=1e-14, btol=1e-14, iter_lim=20 * (n + A_.shape[0]))[0]
-        e_ = float(np.abs(f_ + A_.T @ mu_).max(initial=0.0) + np.abs(c_).max(initial=0.0))
-        return g_, A_, f_, c_, mu_, e_
-
-    gv, A, gf, c, mu, e = state(x)
-    m = A.shape[0]
-    hist = [e]
-    it = 0
-    for it in range(1, iters + 1):
-        if hist[-1] <= tol:
-            it -= 1
-            break
-        lam_g = np.zeros(nlp.lbg.size)
-        lam_g[rows] = mu[:rows.size]
-        Hu = sps.csc_matrix(nlp.hess_lag(x, p, 1.0, lam_g).sparse())
-        H = (Hu + Hu.T - sps.diags(Hu.diagonal())).tocsc()
-        sc = max(1.0, float(np.abs(H.diagonal()).max(initial=0.0)))
-        K = sps.bmat([[H + 1e-12 * sc * sps.identity(n), A.T], [A, -1e-10 * sps.identity(m)]], format="csc")
-        dx = spla.splu(K).solve(np.r_[-gf, -c])[:n]
-        step, accepted = 1.0, False
-        while step >= 1e-3:
-            st_ = state(x + step * dx)
-            if st_[-1] < hist[-1]:
-                x, (gv, A, gf, c, mu, e), accepted = x + step * dx, st_, True
-                hist.append(e)
-                break
-            step *= 0.5
-        if not accepted:
-            break
-    lam_g = np.zeros(nlp.lbg.size)
-    lam_g[rows] = mu[:rows.size]
-    others = np.setdiff1d(np.arange(nlp.lbg.size), rows)
-    free = np.setdiff1d(np.arange(n), fixed)
-    ok = bool(np.all(gv[others] >= nlp.lbg[others] - 1e-7) and np.all(gv[others] <= nlp.ubg[others] + 1e-7)
-              and np.all(x[free] >= nlp.lbx[free] - 1e-9) and np.all(x[free] <= nlp.ubx[free] + 1e-9))
-    return Polished(x, lam_g, hist, float(np.abs(c).max(initial=0.0)), ok, it)
 
 
 def kkt_sensitivity(nlp: NLP, pt: KKTPoint, theta: np.ndarray, times: np.ndarray, *, act_tol: float = 1e-4,
@@ -295,7 +203,7 @@ def kkt_sensitivity(nlp: NLP, pt: KKTPoint, theta: np.ndarray, times: np.ndarray
         gm = np.asarray(grad(x, perturbed_params(nlp, theta, int(i), -h[i])), float).ravel()
         B[:, c] = (gp - gm) / (2 * h[i])
     scale = max(1.0, float(np.abs(H.diagonal()).max(initial=0.0)))
-    K = sps.bmat([[H + 1e-12 * scale * sps.identity(n), A.T], [A, -1e-14 * scale * sps.identity(m)]], format="csc")
+    K = sps.bmat([[H + 1e-12 * scale * sps.identity(n), A.T], [A, -1e-10 * sps.identity(m)]], format="csc")
     rhs = np.vstack([-B, np.zeros((m, len(cols)))])
     sol = spla.splu(K).solve(rhs)
     res = float(np.linalg.norm(K @ sol - rhs) / max(np.linalg.norm(rhs), 1e-300))
@@ -311,7 +219,7 @@ def kkt_sensitivity(nlp: NLP, pt: KKTPoint, theta: np.ndarray, times: np.ndarray
         dP = np.asarray(nlp.ctrl_fn(x + dx[:, i], pt.p), float) - P0
         dq[:, :, i] = Bs @ dP
     rh = _reduced_hessian(H, A) if reduced_hessian else None
-    return Sensitivity(dx, dq, np.asarray(times, float), int(rows_g.size), int(fixed.size), res, stat, rh)
+    return Sensitivity(dx, dq, np.asarray(times, float), int(rows_g.size), int(fixed.size), res, stat, rh, rows_g, fixed)
 
 
 def _reduced_hessian(H, A) -> dict:

@@ -106,7 +106,7 @@ def _training_features(style, test_clip: Path, onesided: bool = False) -> tuple[
 
 def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None, body: str = "adult_male",
                    max_iter: int = 300, log=None, contacts: str = "onesided", constraint_hz: float = 30.0,
-                   unscaled: bool = False, sensitivity: bool = False) -> dict:
+                   unscaled: bool = False, sensitivity: bool = False, hessian: str = "gauss_newton") -> dict:
     """The held-out report (a JSON-ready dict) of a learned style on a test trial.
 
     ``contacts``: "onesided" (default) detects the trial's and the training clip's contacts
@@ -117,7 +117,8 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     ``unscaled``: IPOPT's convergence test on the unscaled KKT error (``s_max`` 1e30): the footstep
     pins make IPOPT's footstep multipliers grow to ~1e14, and by default its error is divided by
     their mean size, so "Solve_Succeeded" can stop far from a KKT point (scenegraph.nio.sensitivity).
-    ``sensitivity``: add dX*/dθ at the learned synthesis (:func:`_sensitivity`) to the report."""
+    ``sensitivity``: add dX*/dθ at the learned synthesis (:func:`_sensitivity`) to the report.
+    ``hessian``: the dynamic syntheses' Hessian ("gauss_newton", the default, or "exact")."""
     if contacts not in CONTACT_RULES:
         raise InputError(f"--contacts {contacts!r}: one of {', '.join(CONTACT_RULES)}")
     onesided = contacts == "onesided"
@@ -171,7 +172,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     for name, st in styles.items():
         say(f"synthesising {name} (max {max_iter} iterations)")
         syn = synthesize(ch, st, steps, t0, t1, example=example, max_iter=max_iter, constraint_hz=constraint_hz,
-                         ipopt_options=UNSCALED if unscaled else ())
+                         ipopt_options=UNSCALED if unscaled else (), hessian=hessian)
         motions[name], audits[name] = syn.result.motion, syn.audit
         solver[name] = {"success": bool(syn.result.success), "status": syn.result.status,
                         "iterations": int(syn.result.iterations), "seconds": round(syn.seconds, 2),
@@ -235,7 +236,8 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "contacts": contacts,
         "constraint_hz": constraint_hz,
         "unscaled_convergence": unscaled,
-        "sensitivity": (_sensitivity(ch, styles, motions["learned"], steps, tt, constraint_hz, max_iter, say)
+        "hessian": hessian,
+        "sensitivity": (_sensitivity(ch, styles, motions["learned"], steps, tt, constraint_hz, max_iter, say, qr)
                         if sensitivity else None),
         "groups": {g: [ch.dof_names[i] for i in H.group_indices(g)] for g in H.JOINT_GROUPS},
         "real": {"features": real_feat},
@@ -249,7 +251,8 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     }
 
 
-def _sensitivity(ch, styles: dict, motion, steps, times, constraint_hz: float, max_iter: int, say) -> dict:
+def _sensitivity(ch, styles: dict, motion, steps, times, constraint_hz: float, max_iter: int, say,
+                 q_real=None) -> dict:
     """dX*/dθ at the learned synthesis (scenegraph.nio.sensitivity): re-solved from it with the exact
     Hessian and the unscaled convergence test (at most ``max_iter`` iterations), then the KKT
     system at that point; with the first-order change towards the default and springs-off styles
@@ -270,6 +273,7 @@ def _sensitivity(ch, styles: dict, motion, steps, times, constraint_hz: float, m
     rep = S.sensitivity_report(sens, learned.vector(), {k: v for k, v in styles.items() if k != "learned"}, learned)
     rep["resolve"] = {"status": pt.status, "iterations": pt.iterations, "violation": pt.violation,
                       "moved_from_synthesis_deg": group_rms_deg(q1, q0),
+                      "rms_vs_real_deg": group_rms_deg(q1, q_real) if q_real is not None else None,
                       "ipopt_max_multiplier": float(np.abs(pt.lam_g).max(initial=0.0))}
     return rep
 
@@ -347,7 +351,7 @@ def _cmd_evaluate(args) -> int:
         rep = evaluate_style(args.style, args.test, frames, args.body, args.max_iter,
                              log=lambda s: print(f"  {s}", file=sys.stderr, flush=True), contacts=args.contacts,
                              constraint_hz=args.constraint_hz, unscaled=args.unscaled_convergence,
-                             sensitivity=args.sensitivity)
+                             sensitivity=args.sensitivity, hessian=args.hessian)
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -389,4 +393,6 @@ def register(sub) -> None:
                    help="IPOPT's convergence test on the unscaled KKT error (s_max 1e30; see docs/learning.md)")
     p.add_argument("--sensitivity", action="store_true",
                    help="add dX*/dtheta at the learned synthesis (implicit-function theorem) to the report")
+    p.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
+                   help="Hessian of the dynamic syntheses (default gauss_newton)")
     p.set_defaults(func=_cmd_evaluate)
