@@ -106,7 +106,8 @@ def _training_features(style, test_clip: Path, onesided: bool = False) -> tuple[
 
 def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None, body: str = "adult_male",
                    max_iter: int = 300, log=None, contacts: str = "onesided", constraint_hz: float = 30.0,
-                   unscaled: bool = False, sensitivity: bool = False, hessian: str = "gauss_newton") -> dict:
+                   unscaled: bool = False, sensitivity: bool = False, hessian: str = "gauss_newton",
+                   tol: float = 1e-4) -> dict:
     """The held-out report (a JSON-ready dict) of a learned style on a test trial.
 
     ``contacts``: "onesided" (default) detects the trial's and the training clip's contacts
@@ -118,7 +119,9 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     pins make IPOPT's footstep multipliers grow to ~1e14, and by default its error is divided by
     their mean size, so "Solve_Succeeded" can stop far from a KKT point (scenegraph.nio.sensitivity).
     ``sensitivity``: add dX*/dθ at the learned synthesis (:func:`_sensitivity`) to the report.
-    ``hessian``: the dynamic syntheses' Hessian ("gauss_newton", the default, or "exact")."""
+    ``hessian``: the dynamic syntheses' Hessian ("gauss_newton", the default, or "exact").
+    ``tol``: IPOPT's tolerance of the dynamic syntheses (default 1e-4, the project's); below the
+    default the "acceptable level" exit is switched off too, so a solve runs to tol or to ``max_iter``."""
     if contacts not in CONTACT_RULES:
         raise InputError(f"--contacts {contacts!r}: one of {', '.join(CONTACT_RULES)}")
     onesided = contacts == "onesided"
@@ -172,7 +175,8 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     for name, st in styles.items():
         say(f"synthesising {name} (max {max_iter} iterations)")
         syn = synthesize(ch, st, steps, t0, t1, example=example, max_iter=max_iter, constraint_hz=constraint_hz,
-                         ipopt_options=UNSCALED if unscaled else (), hessian=hessian)
+                         ipopt_options=(UNSCALED if unscaled else ()) + ((("acceptable_iter", 0),) if tol < 1e-4 else ()),
+                         hessian=hessian, tol=tol)
         motions[name], audits[name] = syn.result.motion, syn.audit
         solver[name] = {"success": bool(syn.result.success), "status": syn.result.status,
                         "iterations": int(syn.result.iterations), "seconds": round(syn.seconds, 2),
@@ -237,6 +241,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "constraint_hz": constraint_hz,
         "unscaled_convergence": unscaled,
         "hessian": hessian,
+        "tol": tol,
         "sensitivity": (_sensitivity(ch, styles, motions["learned"], steps, tt, constraint_hz, max_iter, say, qr)
                         if sensitivity else None),
         "groups": {g: [ch.dof_names[i] for i in H.group_indices(g)] for g in H.JOINT_GROUPS},
@@ -337,6 +342,8 @@ def _cmd_evaluate(args) -> int:
         raise InputError(f"--body {args.body!r}: unknown preset (one of {', '.join(BODIES)})")
     if args.max_iter < 1:
         raise InputError(f"--max-iter {args.max_iter}: must be at least 1")
+    if not 0.0 < args.tol <= 1.0:
+        raise InputError(f"--tol {args.tol}: must lie in (0, 1]")
     if not 1.0 <= args.constraint_hz <= 240.0:
         raise InputError(f"--constraint-hz {args.constraint_hz}: must lie in [1, 240]")
     report = Path(args.report)
@@ -351,7 +358,7 @@ def _cmd_evaluate(args) -> int:
         rep = evaluate_style(args.style, args.test, frames, args.body, args.max_iter,
                              log=lambda s: print(f"  {s}", file=sys.stderr, flush=True), contacts=args.contacts,
                              constraint_hz=args.constraint_hz, unscaled=args.unscaled_convergence,
-                             sensitivity=args.sensitivity, hessian=args.hessian)
+                             sensitivity=args.sensitivity, hessian=args.hessian, tol=args.tol)
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -393,6 +400,9 @@ def register(sub) -> None:
                    help="IPOPT's convergence test on the unscaled KKT error (s_max 1e30; see docs/learning.md)")
     p.add_argument("--sensitivity", action="store_true",
                    help="add dX*/dtheta at the learned synthesis (implicit-function theorem) to the report")
+    p.add_argument("--tol", type=float, default=1e-4,
+                   help="IPOPT tolerance of the dynamic syntheses (default 1e-4; smaller also disables the "
+                        "'acceptable level' exit)")
     p.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
                    help="Hessian of the dynamic syntheses (default gauss_newton)")
     p.set_defaults(func=_cmd_evaluate)
