@@ -8,12 +8,14 @@ KKT stationarity ∇f + Jᵀμ = 0 holds; differentiating it in θ with the acti
     [ H   Aᵀ ] [ dx/dθ ]     [ ∂(∇_x f)/∂θ ]
     [ A   0  ] [ dμ/dθ ] = − [      0      ]
 
-with H the exact Hessian of the Lagrangian (``Subproblem(hessian="exact")``: the compiled
-kernel Hessian; exact for syntheses that free q only and carry no handle springs) and A the
-Jacobian of the active constraints plus one row per active bound.  ∂(∇_x f)/∂θ is taken by
-central differences of the solver's AD gradient (the compiled kernel has first derivatives
-only); in θ the residuals are affine in ks1, ks2, kd, q_rest and √α, so the differences are
-exact up to rounding there.
+with H the Hessian of the Lagrangian from the transcription's ``hessian="exact"`` mode (the
+compiled kernel Hessian; along dx/dθ at a walk's initial motion it was measured 21–29 % off
+finite differences of the gradient — the strict xfail in tests/nio/test_sensitivity.py), A the
+Jacobian of the active constraints (by the primal point, :func:`_active`) plus one row per
+active bound, and least-squares multipliers.  ∂(∇_x f)/∂θ is taken by central differences of
+the AD gradient (the compiled kernel has first derivatives only).  At a point that is not a KKT
+point (what IPOPT returns here, see docs/results.md) the same system gives the derivative of
+the stationary point of the local model; ``Sensitivity.stationarity`` says how far off it is.
 
 Coordinates of θ (:data:`COORDS`): α by ln α_j (one e-fold of one muscle weight; the √α
 parameter of the NLP is exp(u/2)), every other component in its own unit (``THETA_LAYOUT``:
@@ -30,14 +32,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from scenegraph.model.body import N_DOF, N_JOINT, N_ROOT
+from scenegraph.model.body import N_DOF, N_JOINT
 from scenegraph.model.motion import Motion, basis
 from scenegraph.model.style import THETA_LAYOUT, Style
 from scenegraph.problem import NLP, Built, Subproblem, build
 from scenegraph.problem.result import read_solution, violations
 from scenegraph.nio.counterexamples import WARM_START, nlp_params
 from scenegraph.nio.heldout import JOINT_GROUPS, group_indices
-from scenegraph.nio.theta import ALPHA, KERNEL, N_THETA_FULL
+from scenegraph.nio.theta import ALPHA, N_THETA_FULL
 
 __all__ = ["KKTPoint", "solve_kkt", "perturbed_params", "theta_difference", "kkt_sensitivity", "Sensitivity", "typical_change", "group_sensitivity",
            "THETA_FIELDS", "linear_response_deg", "sensitivity_report"]
