@@ -22,6 +22,7 @@ from scenarios.errors import ComposeError, InputError, Location
 __all__ = ["register", "evaluate_style", "VARIANTS", "find_training_clip"]
 
 VARIANTS = ("learned", "default", "springs_off", "kinematic")
+UNSCALED = (("s_max", 1e30),)  # IPOPT: no division of the convergence error by the multipliers' size
 CONTACT_RULES = ("onesided", "central")
 BODIES = ("adult_male", "adult_female", "child")
 
@@ -104,14 +105,23 @@ def _training_features(style, test_clip: Path, onesided: bool = False) -> tuple[
 
 
 def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None, body: str = "adult_male",
-                   max_iter: int = 300, log=None, contacts: str = "onesided", constraint_hz: float = 30.0) -> dict:
+                   max_iter: int = 300, log=None, contacts: str = "onesided", constraint_hz: float = 30.0,
+                   unscaled: bool = False, sensitivity: bool = False, hessian: str = "gauss_newton",
+                   tol: float = 1e-4) -> dict:
     """The held-out report (a JSON-ready dict) of a learned style on a test trial.
 
     ``contacts``: "onesided" (default) detects the trial's and the training clip's contacts
     with one-sided speeds widened by half a frame (``schedules.cli.learn.clip_target``); "central" is
     the detection of the first measurements, which turned 07_12's brisk walk into a run.
     ``constraint_hz``: the footstep and ground constraint grid of every synthesis (Hz; the
-    audit checks 120 Hz: at 30 Hz the feet miss by millimetres between the points)."""
+    audit checks 120 Hz: at 30 Hz the feet miss by millimetres between the points).
+    ``unscaled``: IPOPT's convergence test on the unscaled KKT error (``s_max`` 1e30): the footstep
+    pins make IPOPT's footstep multipliers grow to ~1e14, and by default its error is divided by
+    their mean size, so "Solve_Succeeded" can stop far from a KKT point (scenegraph.nio.sensitivity).
+    ``sensitivity``: add dX*/dθ at the learned synthesis (:func:`_sensitivity`) to the report.
+    ``hessian``: the dynamic syntheses' Hessian ("gauss_newton", the default, or "exact").
+    ``tol``: IPOPT's tolerance of the dynamic syntheses (default 1e-4, the project's); below the
+    default the "acceptable level" exit is switched off too, so a solve runs to tol or to ``max_iter``."""
     if contacts not in CONTACT_RULES:
         raise InputError(f"--contacts {contacts!r}: one of {', '.join(CONTACT_RULES)}")
     onesided = contacts == "onesided"
@@ -164,7 +174,9 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     motions, audits, solver = {}, {}, {}
     for name, st in styles.items():
         say(f"synthesising {name} (max {max_iter} iterations)")
-        syn = synthesize(ch, st, steps, t0, t1, example=example, max_iter=max_iter, constraint_hz=constraint_hz)
+        syn = synthesize(ch, st, steps, t0, t1, example=example, max_iter=max_iter, constraint_hz=constraint_hz,
+                         ipopt_options=(UNSCALED if unscaled else ()) + ((("acceptable_iter", 0),) if tol < 1e-4 else ()),
+                         hessian=hessian, tol=tol)
         motions[name], audits[name] = syn.result.motion, syn.audit
         solver[name] = {"success": bool(syn.result.success), "status": syn.result.status,
                         "iterations": int(syn.result.iterations), "seconds": round(syn.seconds, 2),
@@ -227,6 +239,11 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "max_iter": max_iter,
         "contacts": contacts,
         "constraint_hz": constraint_hz,
+        "unscaled_convergence": unscaled,
+        "hessian": hessian,
+        "tol": tol,
+        "sensitivity": (_sensitivity(ch, styles, motions["learned"], steps, tt, constraint_hz, max_iter, say, qr)
+                        if sensitivity else None),
         "groups": {g: [ch.dof_names[i] for i in H.group_indices(g)] for g in H.JOINT_GROUPS},
         "real": {"features": real_feat},
         "training": train,
@@ -237,6 +254,33 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "seconds": round(time.perf_counter() - t_start, 1),
         "_curves": {"t": tt, **curves},  # popped by the command for the plot, not written
     }
+
+
+def _sensitivity(ch, styles: dict, motion, steps, times, constraint_hz: float, max_iter: int, say,
+                 q_real=None) -> dict:
+    """dX*/dθ at the learned synthesis (scenegraph.nio.sensitivity): re-solved from it with the exact
+    Hessian and the unscaled convergence test (at most ``max_iter`` iterations), then the KKT
+    system at that point; with the first-order change towards the default and springs-off styles
+    and the actual group RMS between the learned synthesis and the re-solved point."""
+    from scenegraph.nio import sensitivity as S
+    from scenegraph.nio.heldout import group_rms_deg
+    from scenegraph.problem import Subproblem
+
+    learned = styles["learned"]
+    sp = Subproblem(ch, learned, motion, steps, free=frozenset({"q"}), hessian="exact", max_iter=max_iter,
+                    tol=1e-6, constraint_hz=constraint_hz, label="sensitivity",
+                    ipopt_options=UNSCALED + (("acceptable_iter", 0),))
+    say(f"sensitivity: re-solving the learned synthesis with the exact Hessian (max {max_iter} iterations)")
+    pt, b = S.solve_kkt(sp)
+    sens = S.kkt_sensitivity(b.nlp, pt, learned.vector(), times)
+    q0 = motion.canonical(motion.to_canonical(times))
+    q1 = pt.motion.canonical(pt.motion.to_canonical(times))
+    rep = S.sensitivity_report(sens, learned.vector(), {k: v for k, v in styles.items() if k != "learned"}, learned)
+    rep["resolve"] = {"status": pt.status, "iterations": pt.iterations, "violation": pt.violation,
+                      "moved_from_synthesis_deg": group_rms_deg(q1, q0),
+                      "rms_vs_real_deg": group_rms_deg(q1, q_real) if q_real is not None else None,
+                      "ipopt_max_multiplier": float(np.abs(pt.lam_g).max(initial=0.0))}
+    return rep
 
 
 PLOT_DOFS = ("hip_flex_l", "knee_flex_l", "ankle_flex_l", "waist_flex", "waist_lat", "chest_flex",
@@ -298,6 +342,8 @@ def _cmd_evaluate(args) -> int:
         raise InputError(f"--body {args.body!r}: unknown preset (one of {', '.join(BODIES)})")
     if args.max_iter < 1:
         raise InputError(f"--max-iter {args.max_iter}: must be at least 1")
+    if not 0.0 < args.tol <= 1.0:
+        raise InputError(f"--tol {args.tol}: must lie in (0, 1]")
     if not 1.0 <= args.constraint_hz <= 240.0:
         raise InputError(f"--constraint-hz {args.constraint_hz}: must lie in [1, 240]")
     report = Path(args.report)
@@ -311,7 +357,8 @@ def _cmd_evaluate(args) -> int:
     try:
         rep = evaluate_style(args.style, args.test, frames, args.body, args.max_iter,
                              log=lambda s: print(f"  {s}", file=sys.stderr, flush=True), contacts=args.contacts,
-                             constraint_hz=args.constraint_hz)
+                             constraint_hz=args.constraint_hz, unscaled=args.unscaled_convergence,
+                             sensitivity=args.sensitivity, hessian=args.hessian, tol=args.tol)
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -349,4 +396,13 @@ def register(sub) -> None:
                         "central differences of the first measurements")
     p.add_argument("--constraint-hz", type=float, default=30.0, metavar="HZ",
                    help="footstep and ground constraint grid of the syntheses (default 30; the audit checks 120)")
+    p.add_argument("--unscaled-convergence", action="store_true",
+                   help="IPOPT's convergence test on the unscaled KKT error (s_max 1e30; see docs/learning.md)")
+    p.add_argument("--sensitivity", action="store_true",
+                   help="add dX*/dtheta at the learned synthesis (implicit-function theorem) to the report")
+    p.add_argument("--tol", type=float, default=1e-4,
+                   help="IPOPT tolerance of the dynamic syntheses (default 1e-4; smaller also disables the "
+                        "'acceptable level' exit)")
+    p.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
+                   help="Hessian of the dynamic syntheses (default gauss_newton)")
     p.set_defaults(func=_cmd_evaluate)

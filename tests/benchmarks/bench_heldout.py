@@ -2,6 +2,7 @@
 
     python tests/benchmarks/bench_heldout.py [--mocap DIR] [--out DIR] [--max-iter 300] [--learn-iter 200]
                                              [--alpha-prior W] [--tie none|lr|groups]
+                                             [--synth-tol TOL] [--hessian gauss_newton|exact]
 
 Two validation trials, each learned and predicted here (nothing is read from the shipped styles):
 
@@ -60,6 +61,10 @@ def main() -> None:
     ap.add_argument("--learn-iter", type=int, default=200, help="NIO iteration limit")
     ap.add_argument("--alpha-prior", type=float, default=0.0, help="compose learn --alpha-prior (0: none)")
     ap.add_argument("--tie", choices=("none", "lr", "groups"), default="none", help="compose learn --tie")
+    ap.add_argument("--synth-tol", type=float, default=1e-4,
+                    help="IPOPT tolerance of the dynamic syntheses (evaluate-style --tol; default 1e-4)")
+    ap.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
+                    help="Hessian of the dynamic syntheses (evaluate-style --hessian)")
     ap.add_argument("--only", choices=[t[0] for t in TRIALS], default=None, help="one trial only (a partial line)")
     args = ap.parse_args()
     mocap, out = _mocap_dir(args.mocap), Path(args.out)
@@ -78,7 +83,7 @@ def main() -> None:
               f"(G {res.g_initial:.4g} -> {res.g_final:.4g}, {res.iterations} iterations, {res.stop_reason})",
               flush=True)
         rep = evaluate_style(style_path, mocap / test, sframes, "adult_male", args.max_iter,
-                             log=lambda s: print(f"  {s}", flush=True))
+                             log=lambda s: print(f"  {s}", flush=True), tol=args.synth_tol, hessian=args.hessian)
         curves = rep.pop("_curves")
         rep["learn_s"] = learn_s[-1]
         plot_curves(curves, out / f"{name}.curves.png")

@@ -144,7 +144,7 @@ BRISK = Path(os.environ.get("COMPOSE_SHARED_MOCAP", ROOT.parent / "shared" / "mo
 
 @pytest.mark.parametrize("case", ["missing_clip", "bad_frames", "unknown_body", "no_provenance", "truncated",
                                   "frames_outside", "empty_clip", "bad_style_field", "bad_max_iter", "report_not_json",
-                                  "bad_constraint_hz"])
+                                  "bad_constraint_hz", "bad_tol"])
 def test_bad_inputs_exit_2_and_write_nothing(case, tmp_path, capsys):
     report = tmp_path / "r.json"
     style = str(WALK_STYLE)
@@ -183,6 +183,8 @@ def test_bad_inputs_exit_2_and_write_nothing(case, tmp_path, capsys):
         report = tmp_path / "r.txt"
     elif case == "bad_constraint_hz":
         extra = ["--constraint-hz", "0"]
+    elif case == "bad_tol":
+        extra = ["--tol", "0"]
     rc = _run(["evaluate-style", style, "--test", clip, "--report", str(report), *extra])
     err = capsys.readouterr().err
     assert rc == 2, err
