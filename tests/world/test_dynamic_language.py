@@ -61,7 +61,8 @@ def test_bad_jumps_are_rejected_at_their_field():
     _bad("  - {type: hop, character: a, landing: {position: [1, 0]}}\n", "goals[0].foot", "")
     _bad("  - {type: jump, character: a, takeoff: {region: {min: [0, 0], max: [1, 1]}}, landing: {position: [1, 0]}}\n",
          "goals[0].takeoff.region", "a region is for landings")
-    _bad(JUMP + "  - {type: walk_to, character: a, target: [1, 1], time: 1.9}\n", "goals[1].type", "cannot be combined")
+    _bad(JUMP + "  - {type: footprints, character: a, steps: [{foot: l, position: [0, 0.1], time: [1.5, 1.9]}]}\n",
+         "goals[1].type", "cannot be combined")
     _bad("  - {type: keyframes, character: a, keys: [{time: 0.5, joints: {knee_flx_l: 40}}]}\n",
          "goals[0].keys[0].joints", "knee_flex_l")
     _bad("  - {type: keyframes, character: a, keys: [{time: 0.5}]}\n", "goals[0].keys[0].time", "position, a heading")
