@@ -3,10 +3,9 @@
 :func:`fit_legs` moves the 14 leg DOFs (LEG_DOFS) of each frame that has a planted foot
 handle so that those handles reach their targets (100 per m of handle error, 1 per rad of
 leg change from the frame's own pose; joint limits clipped); the root and the upper body
-are held.  :func:`plant_feet` takes the targets from footsteps (flat ground, z = 0).  Used
-by the jump synthesis's initial motion (``scenegraph.model.leaps``: the feet stay on their
-footprints through the countermovement, so the kinematic pre-solve has little to change)
-and by the momentum-preserving edit of a captured jump (``scenegraph.mocap.momentum_edit``).
+are held.  Used by the momentum-preserving edit of a captured jump
+(``scenegraph.mocap.momentum_edit``); a model-layer module so that model-level initial
+motions can use it too.
 
 Units: m, s, rad; world frame z up.
 """
@@ -18,26 +17,21 @@ import casadi as ca
 import numpy as np
 
 from scenegraph.model.body import N_DOF, Character
-from scenegraph.model.footsteps import contact_points
 from scenegraph.model.kinematics import handle_positions_fn
 from scenegraph.model.residual import CONTACT_HANDLES
 
-__all__ = ["LEG_DOFS", "leg_fit_fn", "fit_legs", "plant_feet"]
+__all__ = ["LEG_DOFS", "leg_fit_fn", "fit_legs"]
 
 LEG_DOFS = tuple(f"{d}_{s}" for s in ("l", "r") for d in ("hip_flex", "hip_abd", "hip_rot", "knee_flex",
                                                          "ankle_flex", "ankle_inv", "toe_flex"))
 
 
-ROOT_FIT_DOFS = (0, 1, 2, 4)  # root x, y, z (m) and pitch (rad): free with ``root=True``
-
-
 @functools.lru_cache(maxsize=8)
-def leg_fit_fn(ch: Character, root: bool = False):
+def leg_fit_fn(ch: Character):
     """Gauss–Newton residual of a pose: the planted handles at their targets (weight 100 per
-    m) and the leg DOFs near the reference (1 per rad); the upper body held, the root too
-    unless ``root`` (then its position and pitch move as well, 1 per m or rad)."""
+    m) and the leg DOFs near the reference (1 per rad); root and upper body held."""
     q = ca.SX.sym("q", N_DOF)
-    legs = [ch.dof_index(d) for d in LEG_DOFS] + (list(ROOT_FIT_DOFS) if root else [])
+    legs = [ch.dof_index(d) for d in LEG_DOFS]
     x = ca.SX.sym("x", len(legs))
     qq = ca.vertcat(*[x[legs.index(i)] if i in legs else q[i] for i in range(N_DOF)])
     targ = ca.SX.sym("targ", 3, len(CONTACT_HANDLES))
@@ -47,12 +41,10 @@ def leg_fit_fn(ch: Character, root: bool = False):
     return ca.Function("leg_fit", [x, q, targ, mask], [r, ca.jacobian(r, x)]), legs
 
 
-def fit_legs(ch: Character, q: np.ndarray, targets: np.ndarray, mask: np.ndarray, iters: int = 8,
-             root: bool = False) -> np.ndarray:
-    """q (T, 35) with the leg DOFs (and with ``root`` the root's position and pitch) of the
-    frames with a planted handle moved so that those handles reach ``targets`` (T, 3, 6)
-    (Gauss–Newton, joint limits clipped)."""
-    fn, legs = leg_fit_fn(ch, root)
+def fit_legs(ch: Character, q: np.ndarray, targets: np.ndarray, mask: np.ndarray, iters: int = 8) -> np.ndarray:
+    """q (T, 35) with the leg DOFs of the frames with a planted handle moved so that those
+    handles reach ``targets`` (T, 3, 6) (Gauss–Newton, joint limits clipped)."""
+    fn, legs = leg_fit_fn(ch)
     out = q.copy()
     lo, hi = ch.lower[legs], ch.upper[legs]
     for k in np.flatnonzero(mask.any(axis=1)):
@@ -65,19 +57,3 @@ def fit_legs(ch: Character, q: np.ndarray, targets: np.ndarray, mask: np.ndarray
                 break
         out[k, legs] = x
     return out
-
-
-def plant_feet(ch: Character, t: np.ndarray, q: np.ndarray, footsteps, root: bool = False) -> np.ndarray:
-    """Poses ``q`` (T, 35) at times ``t`` (s) with the legs fitted so that every handle a
-    footstep plants (:func:`~scenegraph.model.footsteps.contact_points`) is on its footprint
-    (flat ground, z = 0) while it is planted; ``root``: the root's position and pitch move too."""
-    t = np.asarray(t, float)
-    targets = np.zeros((len(t), 3, len(CONTACT_HANDLES)))
-    mask = np.zeros((len(t), len(CONTACT_HANDLES)), bool)
-    for st in footsteps:
-        for handle, (ta, tb), xy in contact_points(ch, st):
-            j = CONTACT_HANDLES.index(handle)
-            on = (t >= ta - 1e-9) & (t <= tb + 1e-9)
-            targets[on, 0, j], targets[on, 1, j] = float(xy[0]), float(xy[1])
-            mask[on, j] = True
-    return fit_legs(ch, np.asarray(q, float), targets, mask, root=root)
