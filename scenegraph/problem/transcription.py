@@ -439,7 +439,9 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         add(f"avoid:{a.handle}", ca.sumsqr(d) - a.radius ** 2, 0.0, np.inf, "ineq")
 
     if sp.dynamics == "full" and sp.flight_mode == "momentum" and sp.flights:  # ballistic flight (.flight)
-        fc = flight_constraints(ch, flight_groups(sp.flights, m, s), Q, Qd, ca.mtimes(_sparse(basis(nW, s, 0)), warp).T)
+        dep = _depend_on_free(K, s, mask, warp_free)  # a window: only points its free control points move
+        fc = flight_constraints(ch, [k[dep[k]] for k in flight_groups(sp.flights, m, s) if dep[k].sum() >= 2],
+                                Q, Qd, ca.mtimes(_sparse(basis(nW, s, 0)), warp).T)
         if fc is not None:
             add("flight_momentum", fc, 0.0, 0.0)
     # footsteps: planted handles at their footprint on the ground

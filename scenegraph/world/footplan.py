@@ -99,6 +99,18 @@ def plan_footsteps(goals, ctx: FootContext) -> StepPlan:
 
 
 SEAM_SAME_PLACE = 0.05  # m: two stances of one foot meeting at a seam are one stance when this close
+SEAM_SWING_MIN = 0.15  # s: a foot lifted elsewhere comes down at the next segment's first stance no sooner
+
+
+def _delayed(st: Footstep, t0: float) -> Footstep:
+    """``st`` beginning at ``t0`` (s) instead, its heel and ball contact times kept (clipped)."""
+    def rel(part):
+        if part is None:
+            return None
+        a, b = _part_abs(st, part)
+        a = max(a, t0)
+        return None if b <= a else ((a - t0) / (st.t1 - t0), (b - t0) / (st.t1 - t0))
+    return replace(st, t0=float(t0), heel=rel(st.heel), ball=rel(st.ball))
 
 
 def _part_abs(st: Footstep, part):
@@ -128,13 +140,18 @@ def _merge(a: Footstep, b: Footstep) -> Footstep:
 def join_at_seam(before: list, after: list, t: float, where: str) -> list:
     """Footsteps of two consecutive segments joined at the seam time ``t`` (s): a foot planted
     across the seam (a stance of ``before`` ending at ``t`` and one of ``after`` beginning at
-    ``t``) becomes one stance when both are at one place; any other overlap in time of one
-    foot's stances is an InputError located at ``where`` (the later segment's first goal)."""
+    ``t``) becomes one stance when both are at one place; a foot lifted elsewhere less than
+    SEAM_SWING_MIN before its next stance comes down SEAM_SWING_MIN after the lift; any other
+    overlap in time of one foot's stances is an InputError located at ``where`` (the later
+    segment's first goal)."""
     from scenarios.errors import InputError, Location
     out = list(before)
     for st in sorted(after, key=lambda f: f.t0):
         prev = [k for k, f in enumerate(out) if f.foot == st.foot and f.t1 > st.t0 - 1e-6]
         if not prev:
+            lifted = [f.t1 for f in out if f.foot == st.foot and math.dist(f.position, st.position) > SEAM_SAME_PLACE]
+            if lifted and st.t0 < max(lifted) + SEAM_SWING_MIN and st.t1 - (max(lifted) + SEAM_SWING_MIN) >= 0.1:
+                st = _delayed(st, max(lifted) + SEAM_SWING_MIN)  # time to swing the foot over
             out.append(st)
             continue
         k = prev[-1]
