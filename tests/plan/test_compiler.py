@@ -56,6 +56,8 @@ KINDS = [
     # jumps: take-off and landing times given, no timing step (schedule.timewarp: false)
     ("broad_jump", set(), 1),
     ("twist_jump", set(), 1),
+    ("run_and_leap", set(), 1),  # a run-up, a leap, a run on: one whole-scene step
+    ("hopscotch", {TIME_LAYERED}, 1),  # three leaps in 1 s windows and a seam (schedule.kind)
 ]
 
 
