@@ -33,8 +33,8 @@ __all__ = ["leap_footsteps", "leap_flights", "leap_motion", "DIP", "WIND_UP"]
 DIP = 0.14  # m: pelvis drop of the countermovement and the landing absorption of a jump (CMU 16_05: 0.13)
 WIND_UP = 0.44  # the counter-rotation before a turning take-off, as a fraction of the turn (thesis ch. 3's
 # twist jump winds up the other way).  Measured on twist_jump (docs/dynamic-motion.md): started with a wind-up
-# of 0°, 20°, 40° the solver ends at E 737, 629, 608 (a wind-up of 4.5°, 3.2°, 7.2°): from none it stays in a
-# worse local optimum
+# of 0°, 20°, 40° the solver ends at E 737, 629, 608 (the pelvis winding up 1.3°, 3.2°, 7.4°): from none it stays
+# in a worse local optimum
 G = 9.81
 D = np.deg2rad
 
