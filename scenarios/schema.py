@@ -21,6 +21,7 @@ offending field's line and column.  Checks that need to know where the scenario 
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
 
@@ -579,18 +580,36 @@ class Keyframe(_Model):
 LEAP_TAKEOFF_SLACK = 0.3  # m: a given take-off position lies this close to where the character stands
 
 
-def leap_sequence(c, leaps: list) -> list:
-    """[((j, goal), (take-off s, landing s), where the character stands before it [x, y] m)] of
-    one character's jumps and hops ``leaps`` = [(j, goal)], in time order (nominal times
-    for free timing; each free take-off LEAP_TAKEOFF_DEFAULT after the previous landing)."""
+LEAP_LAND_HOLD = 0.15  # s: after a landing both feet stay down this long before a walk or run goes on
+LEAP_PUSH_MIN = 0.3  # s: the least time on the ground before a take-off (a countermovement, a gather)
+
+
+def leap_sequence(c, leaps: list, walks: list = ()) -> list:
+    """[((j, goal), (take-off s, landing s), where the character stands before it [x, y] m,
+    facing rad or None)] of one character's jumps and hops ``leaps`` = [(j, goal)], in time
+    order (nominal times for free timing; each free take-off LEAP_TAKEOFF_DEFAULT after the
+    previous landing or walk).  ``walks`` = [(j, walk_to goal)] of the same character: a walk
+    arriving after the previous landing and by the leap's take-off (or landing) time moves
+    where it stands to the walk's target and its facing to the walk's last leg (its
+    ``heading`` when given); facing None: no walk since the start or the last landing."""
     here = (float(c.start.position[0]), float(c.start.position[1]))
     after, out = 0.0, []
     given = sorted(leaps, key=lambda jg: (jg[1].takeoff.time if jg[1].takeoff.time is not None else
                                           jg[1].landing.time if jg[1].landing.time is not None else float("inf"),
                                           jg[0]))
+    ws = sorted(walks, key=lambda jw: jw[1].time)
     for j, g in given:
+        t_ref = g.takeoff.time if g.takeoff.time is not None else g.landing.time
+        facing = None
+        for _, w in ws:
+            if w.time > after + 1e-9 and (t_ref is None or w.time <= t_ref + 1e-9):
+                pts = [here] + [tuple(p) for p in w.waypoints] + [tuple(w.target)]
+                a, b = pts[-2], pts[-1]
+                facing = math.radians(w.heading) if w.heading is not None else \
+                    math.atan2(b[1] - a[1], b[0] - a[0])
+                here, after = (float(w.target[0]), float(w.target[1])), float(w.time)
         t = g.times(here, after)
-        out.append(((j, g), t, here))
+        out.append(((j, g), t, here, facing))
         here, after = g.landing.centre(), t[1]
     return out
 
@@ -863,23 +882,35 @@ class Scenario(_Model):
         return out
 
     def _leap_problems(self, names: dict[str, int]) -> list[tuple[tuple, str]]:
-        """Jumps and hops of a character form one sequence from where it stands: no footprints
-        or walk_to besides them (not composable yet), a take-off within LEAP_TAKEOFF_SLACK of
-        where it stands, the sequence in time order without overlap, inside the scenario."""
+        """Jumps and hops of a character form one sequence from where it stands, in time order
+        with walk_to goals of the same character (a run-up, a leap, a run on: thesis ch. 3's
+        compositions): no footprints besides them; a take-off within LEAP_TAKEOFF_SLACK of where
+        it stands (after a walk: the walk's target); at least LEAP_PUSH_MIN s on the ground
+        before a take-off; no walk arriving during a leap's push-off, flight or landing hold
+        (LEAP_LAND_HOLD), nor leaps without times among walks; all inside the scenario."""
         out: list[tuple[tuple, str]] = []
         for c in self.characters:
             leaps = [(j, g) for j, g in enumerate(self.goals) if isinstance(g, (JumpGoal, HopGoal))
                      and g.character == c.name]
             if not leaps:
                 continue
-            other = next((j for j, g in enumerate(self.goals) if isinstance(g, (FootprintsGoal, WalkToGoal))
+            other = next((j for j, g in enumerate(self.goals) if isinstance(g, FootprintsGoal)
                           and g.character == c.name), None)
             if other is not None:
-                out.append((("goals", other, "type"), f"{c.name} jumps or hops (goals[{leaps[0][0]}]); footprints and "
-                            "walk_to cannot be combined with jump/hop goals of the same character yet "
-                            "(docs/dynamic-motion.md)"))
+                out.append((("goals", other, "type"), f"{c.name} jumps or hops (goals[{leaps[0][0]}]); footprints "
+                            "cannot be combined with jump/hop goals of the same character (walk_to can: "
+                            "docs/dynamic-motion.md)"))
                 continue
-            for (j, g), (t0, t1), here in leap_sequence(c, leaps):
+            walks = [(j, g) for j, g in enumerate(self.goals) if isinstance(g, WalkToGoal) and g.character == c.name]
+            if walks:
+                untimed = [j for j, g in leaps if g.takeoff.time is None and g.landing.time is None]
+                if untimed:
+                    out.append((("goals", untimed[0], "takeoff", "time"), f"{c.name} walks (goals[{walks[0][0]}]) "
+                                "and leaps: give each leap a take-off or landing time, so the sequence's order "
+                                "is known"))
+                    continue
+            seq = leap_sequence(c, leaps, walks)
+            for k, ((j, g), (t0, t1), here, _) in enumerate(seq):
                 if g.takeoff.region is not None:
                     out.append((("goals", j, "takeoff", "region"), "a take-off is where the character stands: give "
                                 "its position (or nothing); a region is for landings"))
@@ -893,9 +924,19 @@ class Scenario(_Model):
                 if t1 > self.duration + 1e-9:
                     out.append((("goals", j, "landing"), f"the landing at {t1:.3g} s is after the end of the "
                                 f"scenario ({self.duration:g} s)"))
-                if t0 < 0.3 - 1e-9:
-                    out.append((("goals", j, "takeoff"), f"take-off at {t0:.3g} s leaves under 0.3 s on the ground "
-                                "to push off"))
+                ground_from = max([0.0] + [seq[k - 1][1][1] if k else 0.0]
+                                  + [w.time for _, w in walks if w.time <= t0 + 1e-9])
+                if t0 - ground_from < LEAP_PUSH_MIN - 1e-9:
+                    out.append((("goals", j, "takeoff"), f"take-off at {t0:.3g} s leaves under {LEAP_PUSH_MIN:g} s "
+                                f"on the ground to push off (on the ground from {ground_from:.3g} s)"))
+            for jw, w in walks:  # a walk arrives outside every leap's push-off, flight and landing hold
+                for (j, g), (t0, t1), _, _ in seq:
+                    lo, hi = t0 - LEAP_PUSH_MIN, t1 + LEAP_LAND_HOLD
+                    if lo + 1e-9 < w.time < hi - 1e-9:
+                        out.append((("goals", jw, "time"), f"{c.name} arrives at {w.time:g} s, during goals[{j}]'s "
+                                    f"take-off, flight or landing ({lo:.3g}–{hi:.3g} s: {LEAP_PUSH_MIN:g} s on the "
+                                    f"ground before the take-off at {t0:.3g} s, {LEAP_LAND_HOLD:g} s after the "
+                                    f"landing at {t1:.3g} s); move the arrival out of it"))
         return out
 
     def _stature(self, c: "CharacterSpec") -> float:

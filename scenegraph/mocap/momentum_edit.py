@@ -37,11 +37,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
 from scenegraph.model.body import N_DOF, Character
 from scenegraph.model.kinematics import handle_positions_fn, numeric_fk
+from scenegraph.model.legfit import fit_legs as _fit_legs
 from scenegraph.model.residual import CONTACT_HANDLES
 
 __all__ = ["JumpStages", "EditResult", "body_momenta", "jump_stages", "momentum_edit", "naive_edit",
@@ -53,8 +53,6 @@ IK_ROUNDS = 3
 SMOOTH = 0.025  # s: σ of the Gaussian that smooths the leg corrections in time
 BLEND = 0.12  # s: leg corrections fade out after take-off and in before touch-down
 SCALE_MIN_SPEED = 0.2  # m/s: a take-off velocity component below this is edited additively, not scaled
-LEG_DOFS = tuple(f"{d}_{s}" for s in ("l", "r") for d in ("hip_flex", "hip_abd", "hip_rot", "knee_flex",
-                                                         "ankle_flex", "ankle_inv", "toe_flex"))
 
 
 @dataclass(frozen=True)
@@ -157,38 +155,6 @@ def _scaled(P: np.ndarray, at: np.ndarray, new: np.ndarray, ramp: np.ndarray, m:
             out[:, k] = P[:, k] * new[k] / at[k]
         else:
             out[:, k] = P[:, k] + (new[k] - at[k]) * ramp
-    return out
-
-
-def _leg_fit_fn(ch: Character):
-    """Gauss–Newton residual of a pose: the planted handles at their targets (weight 100 per
-    m) and the leg DOFs near the reference (1 per rad); root and upper body held."""
-    q = ca.SX.sym("q", N_DOF)
-    legs = [ch.dof_index(d) for d in LEG_DOFS]
-    x = ca.SX.sym("x", len(legs))
-    qq = ca.vertcat(*[x[legs.index(i)] if i in legs else q[i] for i in range(N_DOF)])
-    targ = ca.SX.sym("targ", 3, len(CONTACT_HANDLES))
-    mask = ca.SX.sym("mask", len(CONTACT_HANDLES))
-    hp = handle_positions_fn(ch, tuple(CONTACT_HANDLES))(qq)
-    r = ca.vertcat(ca.vec((hp - targ) * ca.repmat(mask.T, 3, 1)) * 100.0, x - ca.vertcat(*[q[i] for i in legs]))
-    return ca.Function("leg_fit", [x, q, targ, mask], [r, ca.jacobian(r, x)]), legs
-
-
-def _fit_legs(ch: Character, q: np.ndarray, targets: np.ndarray, mask: np.ndarray, iters: int = 8) -> np.ndarray:
-    """q (T, 35) with the leg DOFs of the frames with a planted handle moved so that those
-    handles reach ``targets`` (T, 3, 6) (Gauss–Newton, joint limits clipped)."""
-    fn, legs = _leg_fit_fn(ch)
-    out = q.copy()
-    lo, hi = ch.lower[legs], ch.upper[legs]
-    for k in np.flatnonzero(mask.any(axis=1)):
-        x = out[k, legs].copy()
-        for _ in range(iters):
-            r, J = (np.asarray(v) for v in fn(x, q[k], targets[k], mask[k].astype(float)))
-            step = np.linalg.lstsq(J, -r.ravel(), rcond=None)[0]
-            x = np.clip(x + step, lo, hi)
-            if np.abs(step).max() < 1e-6:
-                break
-        out[k, legs] = x
     return out
 
 

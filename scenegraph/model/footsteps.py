@@ -271,12 +271,12 @@ def _stance(foot, heading, t0, t1, *, lift: bool, land: bool, free=False, bounds
                     bounds=bounds)
 
 
-def leap_footsteps(leaps, start, T: float, foot_length: float) -> tuple[Footstep, ...]:
-    """Footsteps of a character that stands at ``start`` (x, y, heading; m, rad) and leaps
-    ``leaps`` (Jump records in time order) within [0, T] s."""
+def leap_footsteps(leaps, start, T: float, foot_length: float, t0: float = 0.0) -> tuple[Footstep, ...]:
+    """Footsteps of a character that stands at ``start`` (x, y, heading; m, rad) from ``t0`` s
+    and leaps ``leaps`` (Jump records in time order) within [t0, T] s."""
     steps: list[Footstep] = []
     P, h = (start[0], start[1]), start[2]
-    t_prev, prev_foot, prev_region = 0.0, None, None  # start: standing on both feet
+    t_prev, prev_foot, prev_region = float(t0), None, None  # start: standing on both feet
     seq = list(leaps) + [None]
     for k, lp in enumerate(seq):
         t_end = lp.t_off if lp is not None else T

@@ -93,6 +93,8 @@ class Subproblem:
     motion: Motion
     footsteps: tuple[Footstep, ...] = ()
     flights: tuple[tuple[float, float], ...] = ()  # world s (take-off, landing): zero root residual inside
+    flight_mode: str = "momentum"  # "momentum": ballistic momentum equalities at the flight's points
+    # (scenegraph/problem/flight.py); "penalty": the root residual weighted W_FLIGHT in flight (round 8)
     window: tuple[float, float] | None = None
     free: frozenset = frozenset({"q", "warp"})
     dynamics: str = "full"

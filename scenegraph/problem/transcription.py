@@ -49,6 +49,7 @@ from scenegraph.model.footsteps import Footstep, contact_points
 from scenegraph.model.motion import basis
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
+from scenegraph.problem.flight import flight_constraints, flight_groups
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
 __all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
@@ -177,7 +178,7 @@ def flight_root_weights(sp: Subproblem, s: np.ndarray, w_r: float) -> np.ndarray
     momentum about it constant), ``w_r`` elsewhere.  A stiff least-squares term rather than
     an equality: the kernel has no second derivatives for constraint curvature."""
     w = np.full(len(s), float(w_r))
-    if sp.dynamics == "full":
+    if sp.dynamics == "full" and sp.flight_mode == "penalty":  # "momentum": equalities instead (.flight)
         w[flight_points(sp, s)] = W_FLIGHT
     return w
 
@@ -478,6 +479,12 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         if rows is not None:
             add("clearance", rows, 0.0, np.inf, "ineq")
 
+    if sp.dynamics == "full" and sp.flight_mode == "momentum" and sp.flights:  # ballistic flight (.flight)
+        dep = _depend_on_free(K, s, mask, warp_free)  # a window: only points its free control points move
+        fc = flight_constraints(ch, [k[dep[k]] for k in flight_groups(sp.flights, m, s) if dep[k].sum() >= 2],
+                                Q, Qd, ca.mtimes(_sparse(basis(nW, s, 0)), warp).T)
+        if fc is not None:
+            add("flight_momentum", fc, 0.0, 0.0)
     # footsteps: planted handles at their footprint on the ground
     if pins:
         s_pin = np.array([pn[1] for pn in pins])
@@ -598,7 +605,12 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         gs = ca.Function("g_all", [x, p], [gg]).expand()(xs, ps)
         if gg.shape[0]:
             lam_s = ca.SX.sym("lam_s", gg.shape[0])
-            Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s, gs), xs)[0]])(x, p, lam_g)
+            curved = np.ones(gg.shape[0])  # the flight momentum rows: no curvature (Gauss–Newton in them, .flight)
+            for name, sl, _ in groups:
+                if name == "flight_momentum":
+                    curved[sl] = 0.0
+            Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s * ca.DM(curved), gs), xs)[0]])(
+                x, p, lam_g)
         else:
             Hc = ca.MX(x.shape[0], x.shape[0])
         H = 2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x))

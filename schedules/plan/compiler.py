@@ -279,12 +279,17 @@ def _free(st: _Structure, b: _Block, kind: str, timewarp: bool, has_hard_couplin
     The timewarp is free in timing steps (every step without the timewarp schedule) over the
     whole scene only: a windowed step holds the one warp its neighbours see.  A character
     with a gait change keeps its warp too: its footstep plan times the walk and the run (a
-    free warp compressed the walk and stretched the run into one energy-optimal speed).
+    free warp compressed the walk and stretched the run into one energy-optimal speed); so
+    does a character whose jumps or hops give their times (a free warp moved run_and_leap's
+    landing away from its given time).
     ``duration`` (``timing: free``) rides on a free timewarp; λ is free in every step."""
     free = ["q"]
     whole = b.window[0] <= EPS and b.window[1] >= st.scn.duration - EPS
     gait_change = any(c.gait is not None for ch in b.characters for c in st.style_changes[ch])
-    if (kind == TIMING or not timewarp) and whole and not gait_change:
+    # a character whose leaps have given times keeps its warp too: the take-off and landing happen then
+    timed_leaps = any(isinstance(g, (JumpGoal, HopGoal)) and g.character in b.characters
+                      and (g.takeoff.time is not None or g.landing.time is not None) for g in st.scn.goals)
+    if (kind == TIMING or not timewarp) and whole and not gait_change and not timed_leaps:
         free.append("timewarp")
         if st.scn.timing == "free":
             free.append("duration")

@@ -37,13 +37,22 @@ def _jump(name: str, work: Path) -> tuple[float, float, float]:
     from scenegraph.stage_audit import read_stage
     from scenegraph.stage_audit.flight import flight_physics
     from schedules.cli.main import main
+    import json
+    import resource
     run = work / f"{name}_run"
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
     rc = main(["run", name, "-o", str(work / f"{name}.usda"), "--run-dir", str(run), "--fps", "120",
                "--report", str(work / f"{name}.json"), "--no-store"])
     wall = time.perf_counter() - t0
+    c1 = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
     if rc != 0:
         print(f"{name}: exit {rc}", file=sys.stderr)
+    rep = json.loads((work / f"{name}.json").read_text())
+    its = sum(int(st.get("iterations") or 0) for st in rep.get("steps", []))
+    pre = sum(int(p.get("iterations") or 0) for p in (rep.get("presolve") or {}).values())
+    print(f"{name}: wall {wall:.1f} s, cpu {cpu:.1f} s, IPOPT iterations {its} in {len(rep.get('steps', []))} "
+          f"step(s) + {pre} pre-solve", file=sys.stderr)
     fl = [f for f in flight_physics(read_stage(work / f"{name}.usda"), "jumper") if f.duration > 0.1]
     if not fl:
         return wall, math.nan, math.nan

@@ -56,6 +56,8 @@ KINDS = [
     # jumps: take-off and landing times given, no timing step (schedule.timewarp: false)
     ("broad_jump", set(), 1),
     ("twist_jump", set(), 1),
+    ("run_and_leap", set(), 1),  # a run-up, a leap, a run on: one whole-scene step
+    ("hopscotch", {TIME_LAYERED}, 1),  # three leaps in 1 s windows and a seam (schedule.kind)
 ]
 
 
@@ -87,8 +89,9 @@ def test_general_properties(name):
     for block, steps in _blocks(s).items():
         if steps[0].group in layered:
             kinds = [st.kind for st in steps]
-            assert kinds == (["timing", "full"] if steps[0].role == "whole" else ["full"]), block
-            if steps[0].role == "whole":
+            timed = any(st.kind == "timing" for st in order)  # off with schedule.timewarp: false (hopscotch)
+            assert kinds == (["timing", "full"] if steps[0].role == "whole" and timed else ["full"]), block
+            if steps[0].role == "whole" and timed:
                 timing, full = steps
                 assert timing.window == full.window == (0.0, load_scenario(name).duration)
                 # the timewarp is free unless the character changes gait (its footstep plan times it)
@@ -110,7 +113,10 @@ def test_general_properties(name):
             continue
         spec = load_scenario(name).schedule
         if spec is not None and not spec.timewarp:  # schedule.timewarp: false (the jumps): no timing step
-            assert [st.kind for st in steps] == ["full"] and "timewarp" in steps[0].free, block  # the full step times it
+            # the full step times it, unless leaps with given times hold the warp (their take-off and landing)
+            timed = any(getattr(g, "type", "") in ("jump", "hop") and (g.takeoff.time is not None
+                        or g.landing.time is not None) for g in load_scenario(name).goals)
+            assert [st.kind for st in steps] == ["full"] and ("timewarp" in steps[0].free) != timed, block
             continue
         assert [st.kind for st in steps] == ["timing", "full"], block
         timing, full = steps

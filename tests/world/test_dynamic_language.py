@@ -61,7 +61,8 @@ def test_bad_jumps_are_rejected_at_their_field():
     _bad("  - {type: hop, character: a, landing: {position: [1, 0]}}\n", "goals[0].foot", "")
     _bad("  - {type: jump, character: a, takeoff: {region: {min: [0, 0], max: [1, 1]}}, landing: {position: [1, 0]}}\n",
          "goals[0].takeoff.region", "a region is for landings")
-    _bad(JUMP + "  - {type: walk_to, character: a, target: [1, 1], time: 1.9}\n", "goals[1].type", "cannot be combined")
+    _bad(JUMP + "  - {type: footprints, character: a, steps: [{foot: l, position: [0, 0.1], time: [1.5, 1.9]}]}\n",
+         "goals[1].type", "cannot be combined")
     _bad("  - {type: keyframes, character: a, keys: [{time: 0.5, joints: {knee_flx_l: 40}}]}\n",
          "goals[0].keys[0].joints", "knee_flex_l")
     _bad("  - {type: keyframes, character: a, keys: [{time: 0.5}]}\n", "goals[0].keys[0].time", "position, a heading")
@@ -78,13 +79,20 @@ def test_a_jump_is_a_ground_flight_ground_plan_with_a_ballistic_flight_term():
     assert full.term("flight:jump_0") == "hard"
     sp, _ = lower(scene, full, "a")
     assert sp.flights == ((0.8, 1.28),)
-    # the flight term makes the root residual stiff (W_FLIGHT) at the collocation points in flight
+    s = transcribe(sp, derivatives=False).s_points
+    inside = (s * 2.0 > 0.8 - 1e-6) & (s * 2.0 < 1.28 + 1e-6)  # the take-off and touch-down points too
+    # by default the flight term becomes momentum equalities: 6 per flight point after the first
+    mom = transcribe(sp, derivatives=False)
+    (grp,) = [sl for name, sl, kind in mom.groups if name == "flight_momentum"]
+    assert grp.stop - grp.start == 6 * (inside.sum() - 1)
+    assert flight_root_weights(sp, s, W_ROOT).max() == W_ROOT  # no stiff term with the equalities
+    # the round-8 formulation (flight_mode "penalty") makes the root residual stiff (W_FLIGHT) there
+    sp = replace(sp, flight_mode="penalty")
+    assert not [n for n, _, _ in transcribe(sp, derivatives=False).groups if n == "flight_momentum"]
     nlp = transcribe(sp, derivatives=False)
     rho = np.asarray(nlp.rho_dyn_fn(nlp.x0, nlp.p0)).reshape(-1, 35)  # (N, 35): per point, root last 6
     plain = transcribe(replace(sp, flights=()), derivatives=False)
     rho0 = np.asarray(plain.rho_dyn_fn(plain.x0, plain.p0)).reshape(-1, 35)
-    s = nlp.s_points
-    inside = (s * 2.0 > 0.8 - 1e-6) & (s * 2.0 < 1.28 + 1e-6)  # the take-off and touch-down points too
     assert inside.sum() >= 12
     live = np.abs(rho0[:, 29:]) > 1e-9
     ratio = np.abs(rho[:, 29:]) / np.maximum(np.abs(rho0[:, 29:]), 1e-12)

@@ -67,3 +67,19 @@ def test_twist_jump(tmp_path):
     assert abs(yaw[-1] - yaw[0] - 90.0) < 15.0
     before = (t > 0.3) & (t < 0.8)
     assert yaw[before].min() < yaw[0] - 3.0, "no counter-rotation before take-off"
+
+
+def test_run_and_leap(tmp_path):
+    """A run-up, a leap over 0.3 m and a run on (footsteps planned by three goals in time order):
+    every goal holds (the feet clear the obstacle at mid-flight), the leap's flight is ballistic
+    from the stage, the physics audit passes."""
+    out, rep = tmp_path / "rl.usda", tmp_path / "rl.json"
+    rc = main(["run", "run_and_leap", "-o", str(out), "--report", str(rep), "--run-dir", str(tmp_path / "run"),
+               "--fps", "120", "--no-store"])
+    report = json.loads(rep.read_text())
+    assert rc == 0 and report["all_goals_hold"], report["goals"]
+    assert report["goals"]["leap"]["clearance"]["lowest_foot_mid_flight"] >= 0.3
+    stage = read_stage(out)
+    (f,) = [f for f in flight_physics(stage, "runner") if f.duration > 0.3]  # the leap, not a running stride
+    assert f.parabola_rms_mm <= 2.0 and (f.ang_mom_drift <= 0.02 or f.ang_mom_drift_abs <= 0.5), f
+    assert report["characters"]["runner"]["audit"]["passes"]

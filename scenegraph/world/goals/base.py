@@ -98,6 +98,19 @@ class GoalRecord:
         kind and rank (file order)."""
         raise NotImplementedError(f"{cls.kind} has a step rank but plans no footsteps")
 
+    def sequence_span(self) -> tuple[float | None, float, float] | None:
+        """(begins or None: right after the previous goal, ends, hands off) s when this goal
+        plans a time segment of its character's footsteps and can follow or precede goals of
+        another such kind (walk_to, jump, hop: :func:`scenegraph.world.footplan.plan_sequence`);
+        None (the default) otherwise."""
+        return None
+
+    def sequence_entry(self) -> tuple[float, float] | None:
+        """Where (x, y) m this goal needs its character when its segment begins (a leap: the
+        take-off); the segment before it ends its footsteps there.  None (the default):
+        wherever the previous segment leaves it."""
+        return None
+
     def touches(self) -> tuple[str, str] | None:
         """Two characters whose bodies this goal asks to touch (a tackle's attacker and
         target), exempt from the bodies-apart checks; None (the default) for the rest."""

@@ -53,12 +53,15 @@ class Jump(GoalRecord):
 
     @classmethod
     def from_schema(cls, name: str, g, scn, j: int, plans_last=None) -> "Jump":
-        from scenarios.schema import HopGoal, JumpGoal, leap_sequence
+        from scenarios.schema import HopGoal, JumpGoal, WalkToGoal, leap_sequence
         c = scn.character(g.character)
         leaps = [(i, x) for i, x in enumerate(scn.goals) if isinstance(x, (JumpGoal, HopGoal))
                  and x.character == g.character]
+        walks = [(i, x) for i, x in enumerate(scn.goals) if isinstance(x, WalkToGoal) and x.character == g.character]
         heading = math.radians(c.start.heading)
-        for (i, x), (t0, t1), here in leap_sequence(c, leaps):
+        for (i, x), (t0, t1), here, facing in leap_sequence(c, leaps, walks):
+            if facing is not None:  # a walk before it: the take-off faces the walk's last leg
+                heading = facing
             if i == j:
                 break
             heading += math.radians(x.turn_deg)
@@ -79,13 +82,23 @@ class Jump(GoalRecord):
     def step_rank(self, who: str) -> int | None:
         return RANK_LEAP if who == self.character else None
 
+    def sequence_span(self) -> tuple[float, float, float]:
+        """From LEAP_PUSH_MIN before the take-off to the landing; hands off LEAP_LAND_HOLD after it."""
+        from scenarios.schema import LEAP_LAND_HOLD, LEAP_PUSH_MIN
+        return (self.t_off - LEAP_PUSH_MIN, self.t_land, self.t_land + LEAP_LAND_HOLD)
+
+    def sequence_entry(self) -> tuple[float, float]:
+        return (float(self.takeoff[0]), float(self.takeoff[1]))
+
     @classmethod
     def plan_steps(cls, goals: list, ctx) -> StepPlan:
         """Ground and flight stages of every jump and hop of the character, in time order
         (:func:`scenegraph.model.footsteps.leap_footsteps`), with the leaping initial motion."""
         leaps = sorted(goals, key=lambda g: g.t_off)
-        return StepPlan(leap_footsteps(leaps, ctx.start, ctx.duration, ctx.foot_length),
-                        initial=lambda ch: leap_motion(ch, leaps, ctx.start, ctx.duration))
+        last = leaps[-1]
+        return StepPlan(leap_footsteps(leaps, ctx.start, ctx.duration, ctx.foot_length, ctx.t0),
+                        initial=lambda ch: leap_motion(ch, leaps, ctx.start, ctx.duration),
+                        end=(float(last.landing[0]), float(last.landing[1]), float(last.heading + last.turn)))
 
     def _handles(self) -> tuple[str, ...]:
         return FOOT_HANDLES if self.foot is None else (f"heel_{self.foot}", f"ball_{self.foot}")

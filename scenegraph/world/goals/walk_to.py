@@ -41,13 +41,18 @@ class WalkTo(GoalRecord):
     def step_rank(self, who: str) -> int | None:
         return RANK_WALK if who == self.character else None
 
+    def sequence_span(self) -> tuple[None, float, float]:
+        """A walk begins when the goal before it hands off and hands off on arrival."""
+        return (None, float(self.time), float(self.time))
+
     @classmethod
     def plan_steps(cls, goals: list, ctx) -> StepPlan:
         """Free footsteps along each walk's legs (start → waypoints → target) in time order,
         each leg's time in proportion to its length, in the character's gait (through its gait
         change, if any); then standing at the last target for the rest of the scenario, facing
-        the last walk's ``heading`` or else the direction from the start."""
-        steps, p, t = [], ctx.start[:2], 0.0
+        the last walk's ``heading`` or else the direction from the start.  In a sequence
+        (``ctx.t0``, ``ctx.first``) the walk starts at ``ctx.start`` at ``ctx.t0`` s."""
+        steps, p, t = [], ctx.start[:2], float(ctx.t0)
         change, before = ctx.change, ctx.gait
         for g in sorted(goals, key=lambda g: g.time):
             pts = list(g.waypoints) + [g.target]
@@ -58,7 +63,7 @@ class WalkTo(GoalRecord):
                 dt = (g.time - t) * ln / total if total > 1e-6 else (g.time - t) / len(legs)
                 if dt <= 1e-6:
                     continue
-                first = "r" if not steps else ("l" if steps[-1].foot == "r" else "r")
+                first = (ctx.first or "r") if not steps else ("l" if steps[-1].foot == "r" else "r")
                 if change is not None and t - 1e-6 <= change[0] <= t + dt + 1e-6:
                     steps += gait_footsteps(a, b, t, t + dt, change, foot_length=ctx.foot_length, first=first,
                                             before=before)
@@ -68,12 +73,15 @@ class WalkTo(GoalRecord):
                     steps += walk_footsteps(a, b, t, t + dt, foot_length=ctx.foot_length, first=first)
                 t += dt
             p = g.target
+        last = max(goals, key=lambda g: g.time)
+        h = math.atan2(*(np.asarray(p) - np.asarray(ctx.start[:2]))[::-1]) if last.heading is None \
+            else last.heading
         if t < ctx.duration - 1e-6:
-            last = max(goals, key=lambda g: g.time)
-            h = math.atan2(*(np.asarray(p) - np.asarray(ctx.start[:2]))[::-1]) if last.heading is None \
-                else last.heading
             steps += standing_footsteps((p[0], p[1], h), t, ctx.duration, ctx.foot_length)
-        return StepPlan(tuple(steps), before == "run" and change is None)
+        if steps and len(legs) and last.heading is None:  # the facing of the last leg
+            d = np.asarray(legs[-1][1]) - np.asarray(legs[-1][0])
+            h = math.atan2(d[1], d[0]) if np.linalg.norm(d) > 1e-6 else h
+        return StepPlan(tuple(steps), before == "run" and change is None, end=(float(p[0]), float(p[1]), float(h)))
 
     def targets(self, scene, me, weight, window, hard: bool = False) -> list:
         z = float(handle_track(me, "pelvis", [self.time])[0][2])

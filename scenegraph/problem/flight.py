@@ -1,0 +1,86 @@
+"""Ballistic flight as momentum constraints (thesis ch. 3, formulation (b) in flight).
+
+In flight only gravity acts on the body: its linear momentum P changes by −M g per second
+and its angular momentum H about the centre of mass is constant.  :func:`flight_constraints`
+states exactly that at the collocation points of each flight (its take-off and touch-down
+points included, where the contact force is held at zero too): for every point k after the
+flight's first point k0
+
+    P(k) − P(k0) + M g (t_k − t_k0) e_z = 0,     H(k) − H(k0) = 0      (6 equalities per point)
+
+with P, H functions of the pose q and velocity q̇ only (:func:`momenta_fn`, plain CasADi SX
+algebra of the forward kinematics: the NLP gets their exact second derivatives).  This
+replaces the stiff least-squares term (root residual weighted W_FLIGHT = 1e6 in flight,
+formulation (a)) whose ill-conditioning made IPOPT spend most of a jump's iterations on it;
+the root residual keeps its ordinary weight W_ROOT in flight (it still counts in the energy,
+and between the points it keeps P and H from wiggling).
+
+Units: m, s, kg; world frame z up; q̇ in world seconds.
+"""
+from __future__ import annotations
+
+import functools
+
+import casadi as ca
+import numpy as np
+
+from scenegraph.model.body import G, N_DOF, Character
+from scenegraph.model.kinematics import body_transforms
+
+__all__ = ["momenta_fn", "flight_groups", "flight_constraints", "FLIGHT_MODES"]
+
+FLIGHT_MODES = ("penalty", "momentum")  # Subproblem.flight_mode: W_FLIGHT least squares, or these equalities
+
+
+@functools.lru_cache(maxsize=16)
+def momenta_fn(ch: Character) -> ca.Function:
+    """CasADi Function (q (35), q̇ (35)) → (c (3) m, P (3) kg·m/s, H (3) kg·m²/s about c),
+    world frame: the centre of mass, linear momentum and angular momentum of the body."""
+    q, qd = ca.SX.sym("q", N_DOF), ca.SX.sym("qd", N_DOF)
+    M = ch.total_mass
+    xs, vs, Iws, ws, ms = [], [], [], [], []
+    for b, (R, p) in zip(ch.bodies, body_transforms(ch, q)):
+        x = p + ca.mtimes(R, ca.DM(b.center))
+        v = ca.jtimes(x, q, qd)
+        Rd = ca.reshape(ca.jtimes(ca.vec(R), q, qd), 3, 3)
+        W = ca.mtimes(Rd, R.T)  # ω^ = Ṙ Rᵀ
+        ws.append(ca.vertcat(W[2, 1], W[0, 2], W[1, 0]))
+        Iws.append(ca.mtimes(ca.mtimes(R, ca.DM(b.inertia)), R.T))
+        xs.append(x)
+        vs.append(v)
+        ms.append(float(b.mass))
+    c = sum(m * x for m, x in zip(ms, xs)) / M
+    P = sum(m * v for m, v in zip(ms, vs))
+    vc = P / M
+    H = sum(m * ca.cross(x - c, v - vc) + ca.mtimes(I, w) for m, x, v, I, w in zip(ms, xs, vs, Iws, ws))
+    return ca.Function("momenta", [q, qd], [c, P, H], ["q", "qd"], ["c", "P", "H"])
+
+
+def flight_groups(flights, motion, s: np.ndarray) -> list[np.ndarray]:
+    """Indices into the canonical collocation times ``s`` of each flight (world s (take-off,
+    landing) in ``flights`` of ``motion``), its ends included."""
+    out = []
+    for fa, fb in flights:
+        sa, sb = motion.to_canonical([fa, fb])
+        k = np.flatnonzero((s > sa - 1e-6) & (s < sb + 1e-6))
+        if len(k) >= 2:
+            out.append(k)
+    return out
+
+
+def flight_constraints(ch: Character, groups: list[np.ndarray], Q, Qd, T) -> ca.MX | None:
+    """The equalities of the module docstring (6 per flight point after each flight's first),
+    stacked; ``Q``, ``Qd`` (35, N) poses and world-time velocities at the collocation points,
+    ``T`` (1, N) their world times (MX: the timewarp may be free).  None without flights."""
+    if not groups:
+        return None
+    fn = momenta_fn(ch)
+    M, rows = ch.total_mass, []
+    for k in groups:
+        idx = [int(i) for i in k]
+        _, P, H = fn.map(len(idx))(Q[:, idx], Qd[:, idx])
+        dt = T[:, idx[1:]] - T[:, idx[0]]
+        grav = ca.vertcat(ca.DM.zeros(2, len(idx) - 1), M * G * dt)
+        rows.append(ca.vec(P[:, 1:] - ca.repmat(P[:, 0], 1, len(idx) - 1) + grav))
+        rows.append(ca.vec(H[:, 1:] - ca.repmat(H[:, 0], 1, len(idx) - 1)))
+    return ca.vertcat(*rows)

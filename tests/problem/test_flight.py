@@ -1,0 +1,57 @@
+"""Ballistic flight as momentum equalities (scenegraph/problem/flight.py, issue 20).
+
+The momenta the NLP constrains (CasADi, from the symbolic forward kinematics and its time
+derivative) are checked against an independent computation: the numeric forward kinematics
+of sampled poses and central differences (``scenegraph.mocap.momentum_edit.body_momenta``).  The
+equalities vanish on a motion that is ballistic by construction and not on one that is not.
+No IPOPT (fast).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from scenegraph.mocap.momentum_edit import body_momenta
+from scenegraph.model.body import G, N_DOF, default_character, standing_pose
+from scenegraph.problem.flight import flight_constraints, momenta_fn
+
+
+def _motion(ch, t):
+    """A smooth whole-body motion: every joint and the root swing (rad, m) at its own rate."""
+    rng = np.random.default_rng(3)
+    amp, w, ph = rng.uniform(0.05, 0.3, N_DOF), rng.uniform(2.0, 6.0, N_DOF), rng.uniform(0, 6, N_DOF)
+    q = standing_pose(ch)[None, :] + amp * np.sin(np.outer(t, w) + ph)
+    qd = amp * w * np.cos(np.outer(t, w) + ph)
+    return q, qd
+
+
+def test_momenta_agree_with_finite_differences_of_the_numeric_kinematics():
+    ch = default_character()
+    dt = 1e-4
+    t = np.arange(0.0, 0.3, dt)
+    q, qd = _motion(ch, t)
+    c_n, P_n, H_n, _ = body_momenta(ch, q, 1.0 / dt)
+    fn = momenta_fn(ch)
+    for k in (100, 1500, 2800):
+        c, P, H = (np.asarray(v).ravel() for v in fn(q[k], qd[k]))
+        assert np.allclose(c, c_n[k], atol=1e-9)
+        assert np.allclose(P, P_n[k], rtol=1e-5, atol=1e-4), (P, P_n[k])
+        assert np.allclose(H, H_n[k], rtol=1e-4, atol=1e-3), (H, H_n[k])
+        assert np.linalg.norm(H) > 1.0  # a real test: the swinging body has angular momentum
+
+
+def test_the_equalities_vanish_on_a_ballistic_motion_only():
+    ch = default_character()
+    t = np.linspace(0.0, 0.4, 13)
+    q = np.tile(standing_pose(ch), (len(t), 1))
+    v0 = np.array([2.0, 0.5, 2.0])
+    q[:, :3] += np.outer(t, v0) - np.outer(t ** 2 / 2, [0.0, 0.0, G])  # a rigid pose thrown: a parabola
+    qd = np.zeros_like(q)
+    qd[:, :3] = v0 - np.outer(t, [0.0, 0.0, G])
+    groups = [np.arange(len(t))]
+    g = flight_constraints(ch, groups, ca.DM(q.T), ca.DM(qd.T), ca.DM(t[None, :]))
+    g = np.asarray(ca.evalf(g)).ravel()
+    assert g.shape == (6 * (len(t) - 1),) and np.abs(g).max() < 1e-9
+    qd[:, 2] = v0[2]  # the same speed without gravity: the linear momentum rows are violated by M g t
+    g = np.asarray(ca.evalf(flight_constraints(ch, groups, ca.DM(q.T), ca.DM(qd.T), ca.DM(t[None, :])))).ravel()
+    assert abs(np.abs(g).max() - ch.total_mass * G * t[-1]) < 1e-6
