@@ -1,8 +1,11 @@
 """Physics audit of a synthesized motion, per character.
 
 Everything is re-evaluated from the final motion, not read from the solver: kinematics at
-``rate`` Hz (also between collocation points) and the equations of motion at the times
-where contact forces are known.  Units: N, m, m/s, rad.
+``rate`` Hz (also between collocation points), the equations of motion at the times where
+contact forces are known, and again at every ``rate`` Hz frame of the whole motion — between
+those times and through every flight — with the forces read as the transcription represents
+them (:mod:`.dense_audit`: piecewise linear within each planted interval, zero outside).
+Units: N, m, m/s, rad.
 """
 from __future__ import annotations
 
@@ -11,6 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from scenegraph.model.body import G, N_ROOT, Character
+from scenegraph.model.dense_audit import dense_residual
 from scenegraph.model.footsteps import Footstep, contact_points
 from scenegraph.model.ground import FLAT, Ground
 from scenegraph.model.kinematics import handle_positions_fn
@@ -32,14 +36,21 @@ class Audit:
     foot_sliding_max: float  # m/s, planted handle speed
     joint_limit_violation_max: float  # rad
     energy: float  # Σ α Q_m² dt over the audited times
+    dense_residual_max: float = 0.0  # body weights: largest |Q_0 force| at any ``rate`` Hz frame (dense_audit)
+    dense_residual_rms: float = 0.0  # body weights, RMS over those frames
+    dense_flight_residual_max: float = 0.0  # body weights, the same over the frames with no handle planted
+    dense_residual_time: float = 0.0  # s, world time of the largest
 
     def to_dict(self) -> dict:
         return asdict(self)
 
     def passes(self, footstep_tol=1e-3, penetration_tol=1e-3, friction_tol=1e-3 * 9.81,
-               residual_rel_tol=0.05) -> bool:
+               residual_rel_tol=0.05, dense_tol=None) -> bool:
+        """Whether every figure is within its tolerance; ``dense_tol`` (body weights, None: not
+        judged) bounds the dense residual — at every frame, flights included."""
         return (self.footstep_error_max <= footstep_tol and self.penetration_max <= penetration_tol
-                and self.friction_violation_max <= friction_tol and self.root_residual_rel <= residual_rel_tol)
+                and self.friction_violation_max <= friction_tol and self.root_residual_rel <= residual_rel_tol
+                and (dense_tol is None or self.dense_residual_max <= dense_tol))
 
 
 def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[Footstep, ...] = (),
@@ -105,4 +116,6 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
     dt = np.gradient(times) if len(times) > 1 else np.ones(1)
     energy = float(np.sum(np.asarray(style.alpha)[:, None] * Q[:-N_ROOT] ** 2 * dt))
     mg = ch.total_mass * G
-    return Audit(rms, float(np.abs(root).max()), rms / mg, foot_err, pen, max(0.0, fric), slide, lim, energy)
+    d = dense_residual(ch, style, motion, footsteps, cf, rate, ground)
+    return Audit(rms, float(np.abs(root).max()), rms / mg, foot_err, pen, max(0.0, fric), slide, lim, energy,
+                 d.force_max_bw, d.force_rms_bw, d.flight_force_max_bw, d.worst_time())

@@ -176,6 +176,9 @@ def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, re
             audits[c.name] = a.to_dict()
             audits[c.name]["tolerances"] = dict(AUDIT_TOLERANCES)
             audits[c.name]["passes"] = a.passes(**AUDIT_TOLERANCES)
+            print(f"compose: {c.name}: equations of motion at 120 Hz (issue #15, not judged): root residual max "
+                  f"{a.dense_residual_max:.3g} body weight at {a.dense_residual_time:.3f} s (in flight "
+                  f"{a.dense_flight_residual_max:.3g}), RMS {a.dense_residual_rms:.3g}", file=log, flush=True)
         goals, couplings = goal_report(final, audits)
 
         # --- outputs: the stage, then the report (the stage is what a failure must not half-write)
