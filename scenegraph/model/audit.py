@@ -14,12 +14,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from scenegraph.model.body import G, N_ROOT, Character
-from scenegraph.model.dense_audit import dense_residual
+from scenegraph.model.dense_audit import dense_residual, kernel_theta, shoe_forces
 from scenegraph.model.footsteps import Footstep, contact_points
 from scenegraph.model.ground import FLAT, Ground
 from scenegraph.model.kinematics import handle_positions_fn
 from scenegraph.model.motion import Motion
-from scenegraph.model.residual import CONTACT_HANDLES, FORCE_HANDLES, residual_kernel, theta_kernel_vector
+from scenegraph.model.residual import CONTACT_HANDLES, FORCE_HANDLES, residual_kernel
 from scenegraph.model.style import Style
 
 __all__ = ["Audit", "audit_motion"]
@@ -54,12 +54,15 @@ class Audit:
 
 
 def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[Footstep, ...] = (),
-                 contact_forces: dict | None = None, rate: float = 120.0, ground: Ground = FLAT) -> Audit:
+                 contact_forces: dict | None = None, rate: float = 120.0, ground: Ground = FLAT,
+                 shoe_gate: bool = True) -> Audit:
     """Audit ``motion``; ``contact_forces`` maps handle → (times (n,), forces (n, 3)).
 
     ``ground``: heights, normals and μ come from it (default flat z = 0 with the solver's μ):
     penetration is measured below the ground height under each handle, footprints sit at
     the ground height, the friction cone is about the ground normal at the contact.
+    ``shoe_gate``: the heel shoe springs act only in planned heel contact (the solver's default,
+    ``scenegraph/model/shoe.py``) or everywhere (False: the round-8 semantics).
     """
     n = max(2, int(round(motion.duration * rate)) + 1)
     t = np.linspace(motion.start, motion.end, n)
@@ -109,13 +112,15 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
                 fric = max(fric, ground.cone_violation(where[0, j], where[1, j], f))
     sq = motion.to_canonical(times)
     q2, qd2, qdd2 = motion.state_at_s(sq)
-    th = np.tile(theta_kernel_vector(style)[:, None], (1, len(times)))
+    if shoe_gate:
+        F = F + shoe_forces(ch, style, motion, footsteps, q2, times, ground)
+    th = np.tile(kernel_theta(style, shoe_gate)[:, None], (1, len(times)))
     Q = np.asarray(residual_kernel(ch).map(len(times))(q2.T, qd2.T, qdd2.T, F, th))
     root = Q[-N_ROOT:, :]
     rms = float(np.sqrt(np.mean(root ** 2)))
     dt = np.gradient(times) if len(times) > 1 else np.ones(1)
     energy = float(np.sum(np.asarray(style.alpha)[:, None] * Q[:-N_ROOT] ** 2 * dt))
     mg = ch.total_mass * G
-    d = dense_residual(ch, style, motion, footsteps, cf, rate, ground)
+    d = dense_residual(ch, style, motion, footsteps, cf, rate, ground, shoe_gate)
     return Audit(rms, float(np.abs(root).max()), rms / mg, foot_err, pen, max(0.0, fric), slide, lim, energy,
                  d.force_max_bw, d.force_rms_bw, d.flight_force_max_bw, d.worst_time())

@@ -11,14 +11,16 @@ part of the representation the solver optimised, so it is read the same way here
   transcription's λ is piecewise linear in s between its nodes), zero outside every interval —
   in flight too;
 * any other handle (a coupling's spring at a palm) is interpolated linearly in s within runs
-  of samples (a gap of more than 2.5 × the median spacing ends a run) and is zero outside.
+  of samples (a gap of more than 2.5 × the 90th percentile of the spacings ends a run), zero outside.
 
 With those forces the residual kernel (``residual.residual_kernel``, the same kernel the
-solver and :mod:`.audit` use, shoe springs included) gives the root residual Q_0 (6: the
+solver and :mod:`.audit` use) gives the root residual Q_0 (6: the
 generalised forces of root x, y, z in N and of its yaw, pitch, roll in N m) at every frame.
 :func:`dense_residual` returns it; its ``force_max_bw`` (the largest translational root
-residual, in body weights) is what issue #15 asks to be ≤ 0.05.  This module imports no
-transcription: it is a check of it.
+residual, in body weights) is what issue #15 asks to be ≤ 0.05.  The heel shoe springs act
+as the solver's did: only in planned heel contact (``shoe_gate=True``, :mod:`.shoe`; the
+kernel's own switched off and the gated force added at the heels) or everywhere (False, the
+round-8 semantics).  This module imports no transcription: it is a check of it.
 """
 from __future__ import annotations
 
@@ -30,10 +32,12 @@ from scenegraph.model.body import G, N_ROOT, Character
 from scenegraph.model.footsteps import Footstep, contact_points
 from scenegraph.model.ground import FLAT, Ground
 from scenegraph.model.motion import Motion
+from scenegraph.model.kinematics import handle_positions_fn
 from scenegraph.model.residual import CONTACT_HANDLES, FORCE_HANDLES, residual_kernel, theta_kernel_vector
+from scenegraph.model.shoe import SIDES, shoe_force_numeric, shoe_gate
 from scenegraph.model.style import Style
 
-__all__ = ["DenseResidual", "dense_residual", "force_at"]
+__all__ = ["DenseResidual", "dense_residual", "force_at", "shoe_forces", "kernel_theta"]
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,7 @@ def force_at(ch: Character, motion: Motion, footsteps: tuple[Footstep, ...], con
                     for ta, tb in intervals[h]]
         else:
             gaps = np.diff(ht)
-            step = float(np.median(gaps)) if len(gaps) else 0.0
+            step = float(np.percentile(gaps, 90)) if len(gaps) else 0.0
             cut = np.r_[0, np.nonzero(gaps > 2.5 * step + 1e-9)[0] + 1, len(ht)]
             runs = []
             for a, b in zip(cut[:-1], cut[1:]):
@@ -118,15 +122,46 @@ def force_at(ch: Character, motion: Motion, footsteps: tuple[Footstep, ...], con
     return F
 
 
+def kernel_theta(style: Style, gated: bool) -> np.ndarray:
+    """The kernel's θ for ``style``: with the kernel's own shoe spring off when ``gated``."""
+    th = theta_kernel_vector(style).copy()
+    if gated:
+        th[-2] = 0.0  # k_shoe (theta_kernel_vector: …, k_shoe, h_rest)
+    return th
+
+
+def shoe_forces(ch: Character, style: Style, motion: Motion, footsteps, q: np.ndarray, times: np.ndarray,
+                ground: Ground = FLAT) -> np.ndarray:
+    """The gated shoe springs (3·len(FORCE_HANDLES), len(times)) N, world: vertical at each heel,
+    g(h̄ − h) k (h̄ − h) × :func:`.shoe.shoe_gate` with h the heel's height above the ground;
+    ``q`` (len(times), 35) the poses at ``times``."""
+    times = np.atleast_1d(np.asarray(times, float))
+    F = np.zeros((3 * len(FORCE_HANDLES), len(times)))
+    gate = shoe_gate(ch, footsteps, times, motion.start, motion.end, ground)
+    if not gate.any():
+        return F
+    names = tuple(f"heel_{s}" for s in SIDES)
+    hp = np.asarray(handle_positions_fn(ch, names).map(len(times))(np.atleast_2d(q).T)).reshape(
+        3, len(names), len(times), order="F")
+    for i, name in enumerate(names):
+        h = hp[2, i] - (0.0 if ground.flat else ground.height(hp[0, i], hp[1, i]))
+        F[3 * FORCE_HANDLES.index(name) + 2] = gate[i] * shoe_force_numeric(h, float(style.k_shoe),
+                                                                            float(style.h_rest))
+    return F
+
+
 def dense_residual(ch: Character, style: Style, motion: Motion, footsteps: tuple[Footstep, ...] = (),
-                   contact_forces: dict | None = None, rate: float = 120.0, ground: Ground = FLAT) -> DenseResidual:
+                   contact_forces: dict | None = None, rate: float = 120.0, ground: Ground = FLAT,
+                   shoe_gate: bool = True) -> DenseResidual:
     """The root residual of ``motion`` at ``rate`` Hz (world time, ends included) with the
     solver's forces read as in the module docstring; see :class:`DenseResidual`."""
     n = max(2, int(round(motion.duration * rate)) + 1)
     t = np.linspace(motion.start, motion.end, n)
     q, qd, qdd = motion.state_at_s(motion.to_canonical(t))
     F = force_at(ch, motion, footsteps, contact_forces or {}, t, ground)
-    th = np.tile(theta_kernel_vector(style)[:, None], (1, n))
+    if shoe_gate:
+        F = F + shoe_forces(ch, style, motion, footsteps, q, t, ground)
+    th = np.tile(kernel_theta(style, shoe_gate)[:, None], (1, n))
     Q = np.asarray(residual_kernel(ch).map(n)(q.T, qd.T, qdd.T, F, th))
     root = Q[-N_ROOT:, :]
     mg = ch.total_mass * G

@@ -66,7 +66,9 @@ import numpy as np
 
 from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, Character
 from scenegraph.model.footsteps import Footstep, contact_points
+from scenegraph.model.dynamics import shoe_force
 from scenegraph.model.motion import basis
+from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
@@ -273,6 +275,8 @@ def _node_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
         for _, (ta, tb), _ in contact_points(ch, step, None, sp.ground):
             ends += [t for t in (ta, tb) if m.start < t < m.end]
     ends += [t for fa, fb in sp.flights for t in (fa, fb) if m.start < t < m.end]
+    if sp.shoe_gate:  # the shoe gate's ramps (scenegraph/model/shoe.py) are linear between nodes too
+        ends += gate_breaks(ch, sp.footsteps, m.start, m.end, sp.ground)
     ends = np.unique(np.round(m.to_canonical(ends), 12)) if ends else np.zeros(0)
     h = 1.0 / (n_int * r)
     near = np.array([len(ends) > 0 and bool(np.any(np.abs(ends - u) < 0.3 * h)) for u in base])
@@ -472,8 +476,28 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         spring_force.append(f)  # (3, Ne): at every evaluation point
 
     TH_ev, SA_ev = ca.mtimes(TH, _sparse(Mev)), ca.mtimes(SA, _sparse(Mev))  # style linear between nodes
+    TH_k = TH_ev
+    if sp.shoe_gate and sp.dynamics != "kinematic":
+        # the shoe springs only in planned heel contact (scenegraph/model/shoe.py): the kernel's own
+        # (everywhere) is switched off and the gated one enters as a vertical force at each heel
+        keep_rows = np.ones(N_THETA)
+        keep_rows[4 * N_JOINT] = 0.0  # k_shoe
+        TH_k = TH_ev * ca.repmat(ca.DM(keep_rows), 1, Ne)
+        gate = shoe_gate(ch, sp.footsteps, t_ev, m.start, m.end, sp.ground)  # (2, Ne), world time of s_ev
+        k_shoe, h_rest = TH_ev[4 * N_JOINT, :], TH_ev[4 * N_JOINT + 1, :]
+        for i, side in enumerate(SIDES):
+            if not gate[i].any():
+                continue
+            j = hk_names.index(f"heel_{side}")
+            z = HP[3 * j + 2, :]
+            if not sp.ground.flat:
+                z = z - sp.ground.z(HP[3 * j, :], HP[3 * j + 1, :])
+            fz = ca.DM(gate[i]).T * shoe_force(z, k_shoe, h_rest)
+            place = np.zeros((3 * len(FORCE_HANDLES), 1))
+            place[3 * FORCE_HANDLES.index(f"heel_{side}") + 2, 0] = 1.0
+            Fc = Fc + ca.mtimes(_sparse(place), fz)
     kern = compiled_kernel(ch).map(Ne)
-    QQ = kern(Q, Qd, Qdd, Fc, TH_ev)  # (35, Ne)
+    QQ = kern(Q, Qd, Qdd, Fc, TH_k)  # (35, Ne)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
     w_root = flight_root_weights(sp, s_ev, w_r)  # (Ne,): W_FLIGHT at evaluation points in flight
     scale = OBJ_SCALE / mg  # residuals in units of body weight, objective O(1–100)
@@ -667,7 +691,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
                 C = scale * ca.vertcat(SA_ev, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
                 Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, Ne) * C
                 nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
-                Hk = kernel_hessian(ch).map(Ne)(Q, Qd, Qdd, Fc, TH_ev, Wk)  # (nz, nz Ne)
+                Hk = kernel_hessian(ch).map(Ne)(Q, Qd, Qdd, Fc, TH_k, Wk)  # (nz, nz Ne)
                 Hzz = ca.diagcat(*ca.horzsplit(Hk, nz)) if Ne > 1 else Hk
                 Jz = ca.jacobian(ca.vec(ca.vertcat(Q, Qd, Qdd, Fc)), x)
                 H = H + ca.mtimes(Jz.T, ca.mtimes(Hzz, Jz))
