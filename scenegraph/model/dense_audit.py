@@ -11,7 +11,8 @@ part of the representation the solver optimised, so it is read the same way here
   transcription's λ is piecewise linear in s between its nodes), zero outside every interval —
   in flight too;
 * any other handle (a coupling's spring at a palm) is interpolated linearly in s within runs
-  of samples (a gap of more than 2.5 × the 90th percentile of the spacings ends a run), zero outside.
+  of samples (a gap of more than 2.5 × the median of the larger half of the spacings ends a run),
+  zero outside.
 
 With those forces the residual kernel (``residual.residual_kernel``, the same kernel the
 solver and :mod:`.audit` use) gives the root residual Q_0 (6: the
@@ -108,7 +109,7 @@ def force_at(ch: Character, motion: Motion, footsteps: tuple[Footstep, ...], con
                     for ta, tb in intervals[h]]
         else:
             gaps = np.diff(ht)
-            step = float(np.percentile(gaps, 90)) if len(gaps) else 0.0
+            step = float(np.median(np.sort(gaps)[len(gaps) // 2:])) if len(gaps) else 0.0
             cut = np.r_[0, np.nonzero(gaps > 2.5 * step + 1e-9)[0] + 1, len(ht)]
             runs = []
             for a, b in zip(cut[:-1], cut[1:]):
