@@ -120,7 +120,7 @@ def read_solution(nlp: NLP, x: np.ndarray, p: np.ndarray) -> tuple[Motion, tuple
         f = mg * V @ x[sl]
         forces.setdefault(h, []).append((float(motion.time([s_pts[k]])[0]), f))
         at_node[h, k] = f
-    if sp.dense_dynamics and sp.dynamics != "kinematic":
+    if len(nlp.s_eval) > len(s_pts):  # transcribed densely (evaluation points between the nodes)
         # the transcription's force is piecewise linear in s between nodes: report it at the
         # midpoints too (where the dense residual was evaluated), so readers that interpolate
         # linearly in world time between samples see the force the solver balanced
