@@ -187,9 +187,9 @@ def build_joint(sp_a: Subproblem, sp_b: Subproblem, coupling: JointCoupling,
     for b, x, xsym, handle, sign in ((bs[0], xa, xas, coupling.handle_a, 1.0),
                                      (bs[1], xb, xbs, coupling.handle_b, -1.0)):
         sl = b.anchor_slices[0]
-        t_pts = b.sp.motion.time(b.s_points)
+        t_pts = b.sp.motion.time(b.s_eval)  # the anchors are sampled at the evaluation points
         M = _interp_matrix(tc, t_pts)  # (N, nc)
-        own = _handle_fn(b, handle, b.s_points)(x)  # (3, N)
+        own = _handle_fn(b, handle, b.s_eval)(x)  # (3, Ne)
         anchor = own + sign * ca.mtimes(Fn, ca.DM(M.T)) / JOINT_SPRING_K
         p_exprs.append(ca.vertcat(ca.DM(b.p0[:sl.start]), ca.vec(anchor), ca.DM(b.p0[sl.stop:])))
         handle_c.append(_handle_fn(b, handle, b.sp.motion.to_canonical(tc))(xsym))

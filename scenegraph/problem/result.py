@@ -113,11 +113,26 @@ def read_solution(nlp: NLP, x: np.ndarray, p: np.ndarray) -> tuple[Motion, tuple
         steps[si] = replace(steps[si], position=(float(F[2 * j]), float(F[2 * j + 1])))
     mg = sp.character.total_mass * G
     forces: dict = {}
+    at_node: dict = {}
+    s_pts = nlp.s_points
     for c, (h, k, sl) in enumerate(nlp.contact_index):
         V = nlp.contact_basis[c] if nlp.contact_basis else friction_basis()
-        forces.setdefault(h, []).append((float(motion.time([nlp.s_points[k]])[0]), mg * V @ x[sl]))
-    contact = {h: (np.array([t for t, _ in v]), np.array([f for _, f in v])) for h, v in forces.items()}
-    t_pts = motion.time(nlp.s_points)
+        f = mg * V @ x[sl]
+        forces.setdefault(h, []).append((float(motion.time([s_pts[k]])[0]), f))
+        at_node[h, k] = f
+    if len(nlp.s_eval) > len(s_pts):  # transcribed densely (evaluation points between the nodes)
+        # the transcription's force is piecewise linear in s between nodes: report it at the
+        # midpoints too (where the dense residual was evaluated), so readers that interpolate
+        # linearly in world time between samples see the force the solver balanced
+        for (h, k), f in list(at_node.items()):
+            if (h, k + 1) in at_node:
+                t_mid = float(motion.time([0.5 * (s_pts[k] + s_pts[k + 1])])[0])
+                forces[h].append((t_mid, 0.5 * (f + at_node[h, k + 1])))
+    contact = {}
+    for h, v in forces.items():
+        v = sorted(v, key=lambda tf: tf[0])
+        contact[h] = (np.array([tt for tt, _ in v]), np.array([ff for _, ff in v]))
+    t_pts = motion.time(nlp.s_eval)  # spring forces: at every evaluation point
     for j, h in enumerate(nlp.spring_handles):
         fj = FS[3 * j:3 * j + 3, :].T
         on = (t_pts >= sp.springs[j].times[0] - 1e-9) & (t_pts <= sp.springs[j].times[-1] + 1e-9)
@@ -131,5 +146,6 @@ def read_solution(nlp: NLP, x: np.ndarray, p: np.ndarray) -> tuple[Motion, tuple
                 f_all[np.argmin(np.abs(t_all - tt))] += ff
             contact[h] = (t_all, f_all)
         elif on.any():
-            contact[h] = (t_pts[on], fj[on])
+            o = np.argsort(t_pts[on], kind="stable")
+            contact[h] = (t_pts[on][o], fj[on][o])
     return motion, tuple(steps), float(np.ravel(E)[0]), contact

@@ -105,6 +105,11 @@ class Subproblem:
     style_end: Style | None = None
     collocation_hz: float = 30.0  # dynamics (energy, contact forces)
     constraint_hz: float = 30.0  # footsteps and ground (if higher than collocation_hz)
+    dense_dynamics: bool = True  # nodes on the spline's knots and every contact/flight end, contact forces
+    # piecewise linear between nodes and zero at touch-down and lift-off, the residual also at every
+    # node interval's midpoint (Simpson); False: the round-8 grid (forces at points only), for comparison
+    shoe_gate: bool = True  # the heel shoe springs only in planned heel contact, ramped (scenegraph/model/shoe.py);
+    # False: everywhere a heel is within ~5 mm of the floor (the round-8 kernel's)
     ground_hz: float = 0.0  # extra grid for non-penetration (0: the constraint grid; denser grids
     # were measured to stall IPOPT: 300 iterations without convergence at 90 Hz)
     soft_pin_hz: float = 0.0  # soft footprint springs between the hard points (0: off; see README)

@@ -7,14 +7,35 @@ times in s, positions in m (z up), forces in N; the objective is normalised by
 Transcription
 -------------
 Decision variables: the free DOF spline control points, the free timewarp control points,
-contact coefficients λ ≥ 0 (four per planted handle per collocation point; the contact
-force is m g V λ with V the friction-pyramid basis) and free footprint positions.
-Collocation points are uniform in canonical time s; the energy (paper Eq. 13)
+contact coefficients λ ≥ 0 (four per planted handle per node; the contact force is m g V λ
+with V the friction-pyramid basis) and free footprint positions.  The energy (paper Eq. 13)
 
     E = Σ_k w_k T'(s_k) [ Σ_j α_j Q_mj(s_k)² + w_r Σ_i Q_0i(s_k)² ]
 
 is a sum of squares of residuals computed by one per-point kernel (inverse dynamics plus
 passive, contact and shoe terms) that is compiled to C with its first derivatives.
+
+Dense dynamics (``Subproblem.dense_dynamics``, the default; issue #15 item 2).  The equations
+of motion must hold between the points too, not only at them:
+
+* **nodes** (:func:`_node_grid`): every knot interval of the motion's B-splines cut into
+  ⌈collocation_hz / knot rate⌉ equal parts (the knots are nodes: q̈ is linear in s
+  between knots and kinks at them), plus every contact handle's touch-down and lift-off and
+  every flight's take-off and landing (never merged: each is where a force starts or ends);
+* **forces between nodes**: a handle's contact force is piecewise linear in s between its
+  nodes, and λ = 0 at a touch-down or lift-off inside the motion — the B-spline motion has a
+  continuous q̈, so a force that jumped there could not be balanced on both sides of it (on
+  the round-8 grid the force at a lift-off point was up to 1.3 body weights and nothing the
+  instant after: 1.5 bw of dynamics residual in a walk, 4 bw in a run);
+* **evaluation points**: the kernel is evaluated at every node and at the midpoint of every
+  node interval (forces and per-point style interpolated linearly, spring anchors sampled), summed
+  with Simpson's weights — the objective is the integral of the squared residual, exact
+  for a quadratic one — so the residual between nodes is what the solver minimises, and in a
+  flight (``flights``) every evaluation point carries W_FLIGHT.
+
+``dense_dynamics=False`` gives the round-8 transcription (uniform points plus contact ends,
+forces only at the points, trapezoid weights), kept for comparison (tests/problem/
+test_dense_dynamics.py); the independent check is :mod:`scenegraph.model.dense_audit`.
 IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals) plus the exact Hessian of
 the kinematic constraints by default; ``Subproblem(hessian="exact")`` adds the residual
 curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`~scenegraph.model.residual.kernel_hessian`, chained
@@ -31,7 +52,7 @@ Layout
 ------
 x = [ctrl (free control points, row-major (K, 35) entries) | warp (free timewarp control
 points, s) | footprints (x, y per free footstep, m) | lambda (4 per planted (handle, point))];
-p = [ctrl_fixed (all K·35 control points) | warp_fixed (nW) | anchors (3 × N per spring,
+p = [ctrl_fixed (all K·35 control points) | warp_fixed (nW) | anchors (3 × N_e per spring, at s_eval,
 column-major, m) | theta (N_THETA × N, column-major) | sqrt_alpha (29 × N, column-major)].
 :attr:`NLP.x_layout` and :attr:`NLP.p_layout` name these slices, so callers (NIO, the joint
 problem) substitute parameters by name instead of by offset arithmetic.
@@ -46,7 +67,9 @@ import numpy as np
 from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, Character
 from scenegraph.model.clearance import sphere_centers_fn
 from scenegraph.model.footsteps import Footstep, contact_points
+from scenegraph.model.dynamics import shoe_force
 from scenegraph.model.motion import basis
+from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
 from scenegraph.problem.flight import flight_constraints, flight_groups
@@ -84,7 +107,7 @@ class NLP:
     p0: np.ndarray  # parameter values of sp (callers may solve with others, e.g. NIO's θ)
     x_layout: dict[str, slice]  # "ctrl", "warp", "footprints", "lambda" → slice into x
     p_layout: dict[str, slice]  # "ctrl_fixed", "warp_fixed", "anchors", "theta", "sqrt_alpha" → slice into p
-    anchor_slices: tuple[slice, ...]  # slice into p of each spring's anchor (3 × N at s_points, column-major)
+    anchor_slices: tuple[slice, ...]  # slice into p of each spring's anchor (3 × N_e at s_eval, column-major)
     f_fn: ca.Function  # x, p -> objective (IPOPT's f)
     g_fn: ca.Function  # x, p -> constraints
     hess_lag: ca.Function | None  # x, p, lam_f, lam_g -> upper triangle of the Lagrangian Hessian given to
@@ -94,6 +117,7 @@ class NLP:
     groups: list  # (name, slice into g, kind)
     s_points: np.ndarray  # collocation points (canonical time s)
     contact_index: list  # (handle, k, slice into x) of each planted (handle, collocation point)
+    s_eval: np.ndarray  # where the dynamics are evaluated: s_points, then (dense) every interval's midpoint
     free_steps: list  # indices into sp.footsteps of the free footprints, in x order
     contact_basis: tuple = ()  # friction pyramid V (3×4, world) per contact_index entry
     spring_handles: tuple = ()  # handle of each Subproblem.springs entry, in order
@@ -268,6 +292,63 @@ def _collocation_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     return np.array(out)
 
 
+def _node_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
+    """The dense-dynamics node grid (canonical s): every knot interval of the motion's spline cut
+    into r = ⌈hz / knot rate⌉ equal parts (node spacing ≤ 1/hz: never fewer points than the
+    collocation rate asks — with 24 Hz knots and 30 Hz, 48 Hz nodes; rounding to 24 Hz nodes
+    left a run's landing unbalanced by 0.98 body weight, measured), plus every contact
+    interval's and flight's ends.
+
+    The knots are kept (the spline's q̈ is linear in s between knots and kinks at them, so a
+    force piecewise linear between these nodes can balance it between nodes too); a uniform
+    point closer than 0.3 of the spacing to a contact or flight end gives way to the end; ends
+    are never merged (each handle's force is zero exactly at its own touch-down and lift-off)."""
+    m = sp.motion
+    n_int = m.n_ctrl - 3
+    r = max(1, int(np.ceil(hz * m.duration / n_int - 1e-9)))
+    base = np.linspace(0.0, 1.0, n_int * r + 1)
+    is_knot = (np.arange(len(base)) % r) == 0
+    ends = []
+    for step in sp.footsteps:
+        for _, (ta, tb), _ in contact_points(ch, step, None, sp.ground):
+            ends += [t for t in (ta, tb) if m.start < t < m.end]
+    ends += [t for fa, fb in sp.flights for t in (fa, fb) if m.start < t < m.end]
+    if sp.shoe_gate and not sp.flights:  # the shoe gate's ramps (scenegraph/model/shoe.py): nodes too
+        ends += gate_breaks(ch, sp.footsteps, m.start, m.end, sp.ground)
+    ends = np.unique(np.round(m.to_canonical(ends), 12)) if ends else np.zeros(0)
+    h = 1.0 / (n_int * r)
+    near = np.array([len(ends) > 0 and bool(np.any(np.abs(ends - u) < 0.3 * h)) for u in base])
+    keep = base[is_knot | ~near]
+    grid = np.unique(np.r_[keep, ends])
+    out = [grid[0]]
+    for v in grid[1:]:  # points within 1e-7 (a knot on an end): one node
+        if v - out[-1] > 1e-7:
+            out.append(v)
+        elif v in ends:
+            out[-1] = v
+    return np.array(out)
+
+
+def _dense_points(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(evaluation points, their quadrature weights, interpolation matrix M (N, N_e)) of the
+    dense residual: the N nodes ``s`` first, then the midpoint of every node interval; weights
+    of Simpson's rule (h/6 at each end of an interval, 2h/3 at its midpoint), so Σ w Q² is the
+    integral of Q² for a quadratic Q; column j of M gives the piecewise-linear interpolant of
+    node values at evaluation point j (1 at a node, ½ ½ at a midpoint)."""
+    N = len(s)
+    h = np.diff(s)
+    s_ev = np.r_[s, 0.5 * (s[:-1] + s[1:])]
+    w = np.zeros(len(s_ev))
+    w[:N - 1] += h / 6
+    w[1:N] += h / 6
+    w[N:] = 2 * h / 3
+    M = np.zeros((N, len(s_ev)))
+    M[np.arange(N), np.arange(N)] = 1.0
+    M[np.arange(N - 1), N + np.arange(N - 1)] = 0.5
+    M[np.arange(1, N), N + np.arange(N - 1)] = 0.5
+    return s_ev, w, M
+
+
 def _touches_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Which canonical times ``s`` have a position, velocity or acceleration that depends on a
     free control point (``mask``) at all: the dynamics at the other times are constants."""
@@ -310,8 +391,14 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     mg = ch.total_mass * G
     mask = window_mask(sp, K) if "q" in sp.free else np.zeros(K, bool)
     warp_free = "warp" in sp.free
-    s = _collocation_grid(sp, ch, sp.collocation_hz)
-    s_con = _collocation_grid(sp, ch, sp.constraint_hz) if sp.constraint_hz > sp.collocation_hz else s
+    # a jump's declared flights (sp.flights) keep the round-8 transcription for now: densely the
+    # broad_jump's full step ended "acceptable" with its stance 1.2 bw out of balance (measured;
+    # not yet understood) — see docs/formulation.md
+    dense = sp.dense_dynamics and sp.dynamics != "kinematic" and not sp.flights
+    s = (_node_grid if dense else _collocation_grid)(sp, ch, sp.collocation_hz)
+    # footsteps and ground on the round-8 grid either way (the dense nodes are the dynamics')
+    s_con = _collocation_grid(sp, ch, max(sp.constraint_hz, sp.collocation_hz)) if dense or \
+        sp.constraint_hz > sp.collocation_hz else s
     wq = np.zeros(len(s))  # trapezoid weights in s
     wq[1:] += np.diff(s) / 2
     wq[:-1] += np.diff(s) / 2
@@ -324,9 +411,15 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         if live.any():
             s, wq = s[live], wq[live]
     N = len(s)
-    B0, B1, B2 = (basis(K, s, d) for d in (0, 1, 2))
-    W1, W2 = basis(nW, s, 1), basis(nW, s, 2)
+    if dense and N > 1:  # the dynamics at the nodes and between them (module docstring)
+        s_ev, wq, Mev = _dense_points(s)
+    else:
+        s_ev, Mev = s, np.eye(N)
+    Ne = len(s_ev)
+    B0, B1, B2 = (basis(K, s_ev, d) for d in (0, 1, 2))
+    W1, W2 = basis(nW, s_ev, 1), basis(nW, s_ev, 2)
     t_init = m.time(s)
+    t_ev = m.time(s_ev)
 
     # free / fixed control points
     free_idx = np.flatnonzero(np.repeat(mask[:, None], N_DOF, axis=1).ravel())
@@ -357,12 +450,21 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     # contacts: (handle, k) pairs planted by footsteps, λ per pair
     planted = []  # (handle, k, target xy expr, step index): contact force at grid point k
     pins = []  # (handle, s, target xy expr[, "xy"]): footstep position constraints
+    zero_force = set()  # planted pairs at a touch-down or lift-off inside the motion (dense: λ = 0)
+    seam = ({h for st in sp.footsteps for h, (ta, tb), _ in contact_points(ch, st) if ta <= m.start + 1e-9 <= tb + 2e-9},
+            {h for st in sp.footsteps for h, (ta, tb), _ in contact_points(ch, st) if ta - 2e-9 <= m.end - 1e-9 <= tb})
     anchored = set()  # free footsteps already tied to a held point (one such pin each: more are redundant)
     for si, step in enumerate(sp.footsteps):
         for handle, (ta, tb), xy in planted_handles(si, step):
             sa, sb = m.to_canonical([ta, tb])
             ks = np.flatnonzero((s >= sa - 1e-9) & (s <= sb + 1e-9))
+            # a touch-down (lift-off) inside the motion — or at a cyclic motion's seam, where the
+            # handle is not planted at the other end — starts (ends) its force at 0
+            down = ta > m.start + 1e-9 or (sp.cyclic and handle not in seam[1])
+            up = tb < m.end - 1e-9 or (sp.cyclic and handle not in seam[0])
             for k in ks:
+                if dense and ((abs(s[k] - sa) < 1e-7 and down) or (abs(s[k] - sb) < 1e-7 and up)):
+                    zero_force.add(len(planted))  # touch-down or lift-off: the force starts or ends at 0
                 planted.append((handle, int(k), xy, si))
             span = s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]
             for v, dep in zip(span, _depend_on_free(K, span, mask, warp_free)):
@@ -382,18 +484,19 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         r0 = k * 3 * len(FORCE_HANDLES) + 3 * force_rows[handle]
         Fmap[r0:r0 + 3, 4 * c:4 * c + 4] = mg * Vc[c]
     Fc = ca.reshape(ca.mtimes(_sparse(Fmap), xL), 3 * len(FORCE_HANDLES), N)
+    Fc = ca.mtimes(Fc, _sparse(Mev))  # piecewise linear in s between the nodes: (24, Ne)
 
     # parameters: fixed data and per-point style
     TH = ca.MX.sym("theta", N_THETA, N)
     SA = ca.MX.sym("sqrt_alpha", N_JOINT, N)
-    # spring anchors (3, N each, at the collocation points) are parameters too, so a joint problem
+    # spring anchors (3, Ne each, at the evaluation points) are parameters too, so a joint problem
     # can substitute them (scenegraph/problem/joint.py: anchor = own handle + F / k makes the force F)
-    A_sym = [ca.MX.sym(f"anchor_{j}", 3, N) for j in range(len(sp.springs))]
+    A_sym = [ca.MX.sym(f"anchor_{j}", 3, Ne) for j in range(len(sp.springs))]
     p = ca.vertcat(P_fixed, W_fixed, *[ca.vec(a) for a in A_sym], ca.vec(TH), ca.vec(SA))
     n_fixed = K * N_DOF + nW  # offset of the anchors in p
 
-    Q, Q1, Q2 = (ca.mtimes(_sparse(Bd), P).T for Bd in (B0, B1, B2))  # (35, N)
-    T1 = ca.mtimes(_sparse(W1), warp).T  # (1, N)
+    Q, Q1, Q2 = (ca.mtimes(_sparse(Bd), P).T for Bd in (B0, B1, B2))  # (35, Ne): nodes first
+    T1 = ca.mtimes(_sparse(W1), warp).T  # (1, Ne)
     T2 = ca.mtimes(_sparse(W2), warp).T
     Qd = Q1 / ca.repmat(T1, N_DOF, 1)
     Qdd = Q2 / ca.repmat(T1 ** 2, N_DOF, 1) - Q1 * ca.repmat(T2 / T1 ** 3, N_DOF, 1)
@@ -402,29 +505,50 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
                             | {sg.handle for sg in sp.springs}
                             | set(CONTACT_HANDLES) | {"ankle_l", "ankle_r"}))
     hk = handles_kernel(ch, hk_names)
-    HP = hk.map(N)(Q)  # (3*len, N)
+    HP = hk.map(Ne)(Q)  # (3*len, Ne)
     spring_force = []  # (3, N) world force of each spring at the collocation points
     anchor_values = []  # the anchors' numeric values (p)
     for sg in sp.springs:
         i = hk_names.index(sg.handle)
         pts = np.asarray(sg.points, float).reshape(-1, 3)
-        anchor = np.stack([np.interp(t_init, sg.times, pts[:, c]) for c in range(3)])
-        on = ((t_init >= sg.times[0] - 1e-9) & (t_init <= sg.times[-1] + 1e-9)).astype(float)
+        anchor = np.stack([np.interp(t_ev, sg.times, pts[:, c]) for c in range(3)])
+        on = ((t_ev >= sg.times[0] - 1e-9) & (t_ev <= sg.times[-1] + 1e-9)).astype(float)
         anchor_values.append(anchor.ravel(order="F"))
         f = sg.stiffness * (A_sym[len(anchor_values) - 1] - HP[3 * i:3 * i + 3, :]) * ca.repmat(ca.DM(on).T, 3, 1)
         place = np.zeros((3 * len(FORCE_HANDLES), 3))
         r0 = 3 * FORCE_HANDLES.index(sg.handle)
         place[r0:r0 + 3, :] = np.eye(3)
         Fc = Fc + ca.mtimes(_sparse(place), f)
-        spring_force.append(f)
+        spring_force.append(f)  # (3, Ne): at every evaluation point
 
-    kern = compiled_kernel(ch).map(N)
-    QQ = kern(Q, Qd, Qdd, Fc, TH)  # (35, N)
+    TH_ev, SA_ev = ca.mtimes(TH, _sparse(Mev)), ca.mtimes(SA, _sparse(Mev))  # style linear between nodes
+    TH_k = TH_ev
+    if sp.shoe_gate and sp.dynamics != "kinematic" and not sp.flights:
+        # the shoe springs only in planned heel contact (scenegraph/model/shoe.py): the kernel's own
+        # (everywhere) is switched off and the gated one enters as a vertical force at each heel
+        keep_rows = np.ones(N_THETA)
+        keep_rows[4 * N_JOINT] = 0.0  # k_shoe
+        TH_k = TH_ev * ca.repmat(ca.DM(keep_rows), 1, Ne)
+        gate = shoe_gate(ch, sp.footsteps, t_ev, m.start, m.end, sp.ground)  # (2, Ne), world time of s_ev
+        k_shoe, h_rest = TH_ev[4 * N_JOINT, :], TH_ev[4 * N_JOINT + 1, :]
+        for i, side in enumerate(SIDES):
+            if not gate[i].any():
+                continue
+            j = hk_names.index(f"heel_{side}")
+            z = HP[3 * j + 2, :]
+            if not sp.ground.flat:
+                z = z - sp.ground.z(HP[3 * j, :], HP[3 * j + 1, :])
+            fz = ca.DM(gate[i]).T * shoe_force(z, k_shoe, h_rest)
+            place = np.zeros((3 * len(FORCE_HANDLES), 1))
+            place[3 * FORCE_HANDLES.index(f"heel_{side}") + 2, 0] = 1.0
+            Fc = Fc + ca.mtimes(_sparse(place), fz)
+    kern = compiled_kernel(ch).map(Ne)
+    QQ = kern(Q, Qd, Qdd, Fc, TH_k)  # (35, Ne)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
-    w_root = flight_root_weights(sp, s, w_r)  # (N,): W_FLIGHT at collocation points in flight
+    w_root = flight_root_weights(sp, s_ev, w_r)  # (Ne,): W_FLIGHT at evaluation points in flight
     scale = OBJ_SCALE / mg  # residuals in units of body weight, objective O(1–100)
     wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
-    rho_m = SA * QQ[:N_JOINT, :]
+    rho_m = SA_ev * QQ[:N_JOINT, :]
     rho_0 = ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1) * QQ[N_JOINT:, :]
     rho_dyn = ca.vec(ca.vertcat(rho_m, rho_0) * ca.repmat(wt, N_DOF, 1)) * scale
     energy = ca.sumsqr(ca.vec(rho_m * ca.repmat(wt, N_JOINT, 1)))  # Σ w T' α Q_m²
@@ -569,8 +693,12 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         for c, (_, k, _, _) in enumerate(planted):
             if edge[k]:
                 ubx[3][4 * c:4 * c + 4] = 0.0
+    for c in (zero_force if n_lam else ()):  # dense: forces continuous at touch-down and lift-off
+        ubx[3][4 * c:4 * c + 4] = 0.0
     x0 = [ctrl0.ravel()[free_idx], np.asarray(m.warp, float) if warp_free else [], [],
           _lambda_guess(sp, planted if n_lam else [], s, mg)]
+    for c in (zero_force if n_lam else ()):
+        x0[3][4 * c:4 * c + 4] = 0.0
     fp0 = []
     for si in free_steps:
         fp0 += list(sp.footsteps[si].position)
@@ -623,11 +751,11 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             # Hessian).  A free timewarp (and a spring's force, nonlinear in q) also curves z and C:
             # those curvature terms are left out (Gauss–Newton in them).
             if sp.dynamics != "kinematic":
-                C = scale * ca.vertcat(SA, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
-                Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, N) * C
+                C = scale * ca.vertcat(SA_ev, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
+                Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, Ne) * C
                 nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
-                Hk = kernel_hessian(ch).map(N)(Q, Qd, Qdd, Fc, TH, Wk)  # (nz, nz N)
-                Hzz = ca.diagcat(*ca.horzsplit(Hk, nz)) if N > 1 else Hk
+                Hk = kernel_hessian(ch).map(Ne)(Q, Qd, Qdd, Fc, TH_k, Wk)  # (nz, nz Ne)
+                Hzz = ca.diagcat(*ca.horzsplit(Hk, nz)) if Ne > 1 else Hk
                 Jz = ca.jacobian(ca.vec(ca.vertcat(Q, Qd, Qdd, Fc)), x)
                 H = H + ca.mtimes(Jz.T, ca.mtimes(Hzz, Jz))
             if rho_x.shape[0]:  # the other least-squares terms are plain SX algebra: exact Hessian directly
@@ -651,10 +779,10 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     pv = np.concatenate([ctrl0.ravel(), np.asarray(m.warp, float), *anchor_values,
                          TH0.ravel(order="F"), SA0.ravel(order="F")])
 
-    springs_out = ca.vertcat(*spring_force) if spring_force else ca.MX(0, N)
+    springs_out = ca.vertcat(*spring_force) if spring_force else ca.MX(0, Ne)
     unpack = ca.Function("unpack", [x, p], [P, warp, xF, energy, root_energy, springs_out])
     x_layout = _layout(("ctrl", xP.shape[0]), ("warp", xW.shape[0]), ("footprints", xF.shape[0]), ("lambda", n_lam))
-    p_layout = _layout(("ctrl_fixed", K * N_DOF), ("warp_fixed", nW), ("anchors", 3 * N * len(sp.springs)),
+    p_layout = _layout(("ctrl_fixed", K * N_DOF), ("warp_fixed", nW), ("anchors", 3 * Ne * len(sp.springs)),
                        ("theta", N_THETA * N), ("sqrt_alpha", N_JOINT * N))
     assert x_layout["lambda"].stop == x.shape[0] and p_layout["sqrt_alpha"].stop == p.shape[0] == pv.size
     lam0 = x_layout["lambda"].start
@@ -664,9 +792,9 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         lbx=np.concatenate([np.ravel(a) for a in lbx]), ubx=np.concatenate([np.ravel(a) for a in ubx]),
         lbg=np.asarray(lbg, float), ubg=np.asarray(ubg, float), p0=pv,
         x_layout=x_layout, p_layout=p_layout,
-        anchor_slices=tuple(slice(n_fixed + 3 * N * j, n_fixed + 3 * N * (j + 1)) for j in range(len(sp.springs))),
+        anchor_slices=tuple(slice(n_fixed + 3 * Ne * j, n_fixed + 3 * Ne * (j + 1)) for j in range(len(sp.springs))),
         f_fn=ca.Function("f", [x, p], [f]), g_fn=ca.Function("g", [x, p], [gg]), hess_lag=hess, jac_g=jac_g,
-        unpack=unpack, groups=groups, s_points=s,
+        unpack=unpack, groups=groups, s_points=s, s_eval=s_ev,
         contact_index=[(h, k, slice(lam0 + 4 * c, lam0 + 4 * c + 4))
                        for c, (h, k, _, _) in enumerate(planted if n_lam else [])],
         free_steps=free_steps, contact_basis=tuple(Vc), spring_handles=tuple(sg.handle for sg in sp.springs),

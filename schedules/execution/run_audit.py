@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AUDIT_FPS", "allowed_contacts", "audit_run_stage", "force_arrows"]
+__all__ = ["AUDIT_FPS", "allowed_contacts", "audit_run_stage", "force_arrows", "jumps"]
 
 AUDIT_FPS = 120.0
 
@@ -39,10 +39,19 @@ def allowed_contacts(scene) -> list[str]:
     return sorted(set(out))
 
 
+def jumps(scene, who: str) -> bool:
+    """Whether ``who`` has a goal with a declared flight (a jump): its subproblems keep the
+    round-8 transcription, shoe springs everywhere (scenegraph/problem/transcription.py)."""
+    return any(getattr(g, "flight", None) is not None and getattr(g, "character", None) == who for g in scene.goals)
+
+
 def _interp_runs(times: np.ndarray, ht: np.ndarray, hf: np.ndarray) -> np.ndarray:
     """Forces (T, 3) at ``times``: linear between consecutive solver times of one contact
     run, zero elsewhere.  The solver reports a handle's force only at the collocation points
-    where it is in contact, so a gap longer than 2.5 × the usual spacing ends a run."""
+    where it is in contact, so a gap longer than 2.5 × the usual spacing (the median of the
+    larger half of the gaps: the dense transcription's samples cluster near contact ends, and
+    2.5 × the median of all gaps split real runs — a walk's heel lost 0.9 body weight on the
+    stage) ends a run."""
     o = np.argsort(ht, kind="stable")
     ht, hf = ht[o], hf[o]
     V = np.zeros((len(times), 3))
@@ -50,7 +59,7 @@ def _interp_runs(times: np.ndarray, ht: np.ndarray, hf: np.ndarray) -> np.ndarra
         V[np.abs(times - ht[0]) < 1e-9] = hf[0]
         return V
     gaps = np.diff(ht)
-    step = float(np.median(gaps))
+    step = float(np.median(np.sort(gaps)[len(gaps) // 2:]))
     breaks = np.nonzero(gaps > 2.5 * step + 1e-9)[0]
     starts = np.r_[0, breaks + 1]
     ends = np.r_[breaks, len(ht) - 1]
@@ -91,15 +100,19 @@ def force_arrows(scene, contact_forces: dict, fps: float) -> list:
             O = np.einsum("tij,j->ti", R[:, bi], np.asarray(h.point, float)) + p[:, bi]
             kind = "coupling" if handle.startswith("palm") else "contact"
             out.append(ForceArrow(f"{c.name}_{handle}", O, V, kind, 1e-3, float(times[0]), c.name))
-        # the shoe springs (dynamics.shoe_force, Eq. 9): vertical, from the heel's height z
-        # (world, as the dynamics take it), g(h̄ − z) k_shoe (h̄ − z) with g the smooth step
+        # the shoe springs (scenegraph/model/shoe.py): vertical, g(h̄ − h) k_shoe (h̄ − h) with h the
+        # heel's height above the ground and g the smooth step, only in planned heel contact (gated)
+        from scenegraph.model.shoe import shoe_force_numeric, shoe_gate
         k_shoe, h_rest = float(c.style.k_shoe), float(c.style.h_rest)
-        for side in ("l", "r"):
+        gate = shoe_gate(c.character, c.footsteps, times, c.motion.start, c.motion.end, scene.ground)
+        if jumps(scene, c.name):  # solved with the shoe springs everywhere
+            gate = np.ones_like(gate)
+        for i, side in enumerate(("l", "r")):
             h = c.character.handle(f"heel_{side}")
             bi = names.index(h.body)
             O = np.einsum("tij,j->ti", R[:, bi], np.asarray(h.point, float)) + p[:, bi]
-            d = h_rest - O[:, 2]
-            fz = (np.tanh(500.0 * d) + 1.0) / 2.0 * k_shoe * d
+            above = O[:, 2] - (0.0 if scene.ground.flat else scene.ground.height(O[:, 0], O[:, 1]))
+            fz = gate[i] * shoe_force_numeric(above, k_shoe, h_rest)
             V = np.stack([np.zeros_like(fz), np.zeros_like(fz), fz], 1)
             out.append(ForceArrow(f"{c.name}_shoe_{side}", O, V, "shoe", 1e-3, float(times[0]), c.name))
     return out

@@ -36,7 +36,12 @@ def test_walk_cycle_converges_and_passes_the_audit(walk):
     assert aud.penetration_max <= 1e-3, aud
     assert aud.foot_sliding_max <= 0.05, aud
     assert aud.friction_violation_max <= 1e-6
-    assert aud.root_residual_rel <= 1e-3, aud     # root residual vs body weight
+    # root residual vs body weight at the solver's force times (nodes and midpoints): with forces
+    # that may jump between points it was ≤ 1e-3 at the points and 2.7 bw between them; the
+    # dense transcription spreads it over nodes and midpoints (measured 1.9e-4–2.9e-3 RMS while it was
+    # built) and holds it at every 120 Hz frame (measured 0.018 bw)
+    assert aud.root_residual_rel <= 5e-3, aud
+    assert aud.dense_residual_max <= 0.05, aud
     assert aud.joint_limit_violation_max <= 1e-6
     speed = (res.motion.canonical([1.0])[0, 0] - res.motion.canonical([0.0])[0, 0]) / res.motion.duration
     assert 1.1 < speed < 1.5
@@ -95,7 +100,10 @@ def test_run_with_flight_phases():
                      soft_pin_hz=120.0, soft_ground_hz=120.0, soft_ground_weight=1e4)
     res, aud = syn.result, syn.audit
     assert res.success, res.summary()
-    assert aud.root_residual_rel <= 1e-3, aud
+    # see test_walk_cycle_converges_and_passes_the_audit; measured 0.0047 (the dense transcription
+    # spreads the soft root residual over nodes and midpoints) and 0.030 bw at 120 Hz, in flight
+    assert aud.root_residual_rel <= 1e-2, aud
+    assert aud.dense_residual_max <= 0.05, aud  # every 120 Hz frame, the flights included
     assert aud.footstep_error_max <= 1e-3, aud
     assert aud.penetration_max <= 1e-3, aud
     assert aud.friction_violation_max <= 1e-6, aud
@@ -139,7 +147,7 @@ def test_spring_force_enters_the_dynamics():
     with_force = syn.audit
     without = audit_motion(CH, STYLE, res.motion, res.footsteps,
                            {h: v for h, v in res.contact_forces.items() if h != "palm_r"})
-    assert with_force.root_residual_rel <= 1e-3, with_force
+    assert with_force.root_residual_rel <= 5e-3, with_force  # see test_walk_cycle_converges_and_passes_the_audit
     assert without.root_residual_max > 3 * with_force.root_residual_max + 1.0
 
 
