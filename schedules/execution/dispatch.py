@@ -72,6 +72,10 @@ def priority_order(dsk: dict, keys: list) -> list:
     return out
 
 
+def _value(x):
+    return x
+
+
 def _slots(client) -> int:
     workers = client.scheduler_info(n_workers=-1).get("workers", {})
     return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
@@ -87,11 +91,12 @@ def dispatch(client, dsk: dict, keys: list, on_done: Callable[[Hashable, object]
     order = priority_order(dsk, keys)
     deps = task_dependencies(dsk)
     wanted = set(keys)
-    futures: dict = {}  # key -> future (data scattered, tasks submitted)
+    futures: dict = {}  # key -> future of its task (data nodes too)
     waiting = [k for k in order if is_task(dsk[k])]
     for k in order:
-        if not is_task(dsk[k]):
-            futures[k] = client.scatter([dsk[k]], hash=False)[0]  # a list: one future, whatever the value is
+        if not is_task(dsk[k]):  # data as a task that returns it: the scheduler can recompute it when the
+            # worker holding it dies (scattered data would be lost, and every task reading it cancelled)
+            futures[k] = client.submit(_value, dsk[k], key=k, pure=False)
     done = {k for k in futures}
     readers = {k: sum(k in deps[t] for t in waiting) for k in order}  # tasks still to read k's result
     running = as_completed()

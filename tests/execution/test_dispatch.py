@@ -97,3 +97,55 @@ def test_a_failing_task_raises_and_nothing_keeps_running(client):
     while time.time() < deadline and any(client.processing().values()):
         time.sleep(0.1)
     assert not any(client.processing().values())
+
+
+def _pid() -> int:
+    import os as _os
+
+    return _os.getpid()
+
+
+def _slow_sum(data: list, seconds: float) -> int:
+    import time as _t
+
+    _t.sleep(seconds)
+    return sum(data)
+
+
+def test_a_killed_worker_s_task_and_the_data_it_held_are_recomputed():
+    """SIGKILL the worker running a task (which also holds the graph's data node): the task is
+    run again elsewhere and its result arrives — data must be recomputable, not scattered."""
+    import os
+    import signal
+
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=50)
+    c = distributed.Client(cluster)
+    try:
+        c.wait_for_workers(2)
+        pids = c.run(_pid)
+        dsk = {"data": [1, 2, 3], "slow": (_slow_sum, "data", 3.0), "after": (_add, "slow", 10)}
+        killed = []
+
+        def killer():
+            deadline = time.time() + 20
+            while time.time() < deadline and not killed:
+                for addr, keys in c.processing().items():
+                    if "slow" in {str(k) for k in keys}:
+                        time.sleep(0.5)
+                        os.kill(pids[addr], signal.SIGKILL)
+                        killed.append(addr)
+                        return
+                time.sleep(0.05)
+
+        th = threading.Thread(target=killer, daemon=True)
+        th.start()
+        got = {}
+        dispatch(c, dsk, ["after"], lambda k, r: got.__setitem__(k, r))
+        th.join(5)
+        assert killed, "the task finished before it could be killed"
+        assert got == {"after": 16}
+    finally:
+        c.close()
+        cluster.close()
