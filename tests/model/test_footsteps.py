@@ -42,6 +42,7 @@ NOT_GENERATORS = {
     "scenegraph/mocap/contacts.py": "its own Footstep type: contacts detected in a mocap clip",
     "schedules/execution/checkpoints.py": "reads footsteps stored in a checkpoint",
     "schedules/cli/learn.py": "footsteps measured from a mocap clip (the learning target)",
+    "scenegraph/world/footplan.py": "_merge: one stance from two generated stances of a foot meeting at a seam",
 }
 
 
