@@ -50,7 +50,8 @@ def task_dependencies(dsk: dict) -> dict:
 def priority_order(dsk: dict, keys: list) -> list:
     """Every key needed for ``keys``: ``keys`` in their order, each preceded by what it needs
     (depth first, in argument order); keys that nothing wanted needs are dropped."""
-    deps = {k: sorted(d, key=list(dsk).index) for k, d in task_dependencies(dsk).items()}
+    pos = {k: i for i, k in enumerate(dsk)}
+    deps = {k: sorted(d, key=pos.__getitem__) for k, d in task_dependencies(dsk).items()}
     out, seen = [], set()
 
     def visit(k) -> None:
@@ -98,7 +99,10 @@ def dispatch(client, dsk: dict, keys: list, on_done: Callable[[Hashable, object]
             # worker holding it dies (scattered data would be lost, and every task reading it cancelled)
             futures[k] = client.submit(_value, dsk[k], key=k, pure=False)
     done = {k for k in futures}
-    readers = {k: sum(k in deps[t] for t in waiting) for k in order}  # tasks still to read k's result
+    readers = dict.fromkeys(order, 0)  # tasks still to read k's result
+    for t in waiting:
+        for d in deps[t]:
+            readers[d] += 1
     running = as_completed()
     by_future: dict = {}
 
