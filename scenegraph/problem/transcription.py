@@ -367,16 +367,47 @@ def _drop_cyclic_duplicates(pins: list) -> list:
     handle pinned at both ends, the end pin's height and the placement of every other such
     handle follow from the start pins; only the shift (x, y) is new.  Keeping them all makes
     the constraint Jacobian rank-deficient (IPOPT stops with "Error in step computation"),
-    so the first such end pin keeps only its (x, y) (marked by a fourth entry "xy") and the
-    other such end pins are dropped.
+    so the first such end pin keeps only its (x, y) and the other such end pins are dropped.
     """
     at_start = {pn[0] for pn in pins if pn[1] < 1e-9}
     repeated = [pn for pn in pins if pn[1] > 1.0 - 1e-9 and pn[0] in at_start]
     if not repeated:
         return pins
-    h, v, xy = repeated[0]
-    return [pn for pn in pins if pn not in repeated] + [(h, v, xy, "xy")]
+    h, v, xy, _, si = repeated[0]
+    return [pn for pn in pins if pn not in repeated] + [(h, v, xy, "xy", si)]
 
+
+def _heel_implied_along_foot(pins: list, heading: dict) -> list:
+    """A heel pinned at the same point in time as its foot's ball keeps only its height and its
+    position across the foot (rows ``"zn"``).
+
+    Heel and ball lie on one rigid foot at a fixed distance; with the ball's three coordinates and
+    the heel's height and sideways offset given, the heel's position along the foot follows.  The
+    third row is dependent: every planted point of a flat foot added one dependent row to the
+    constraint Jacobian (a 1.3 s walk: 240 footstep rows of rank 215), its multipliers grew to
+    ~1e14 and IPOPT's scaled convergence test stopped meaning anything (docs/learning.md).
+    """
+    balls = {(pn[0].replace("ball_", ""), round(pn[1], 9)) for pn in pins
+             if pn[0].startswith("ball_") and pn[3] == "xyz"}
+    out = []
+    for pn in pins:
+        h, v, xy, rows, si = pn
+        if h.startswith("heel_") and rows == "xyz" and (h[len("heel_"):], round(v, 9)) in balls:
+            pn = (h, v, xy, ("zn", float(heading[si])), si)
+        out.append(pn)
+    return out
+
+
+def _pin_rows(d, rows):
+    """The constrained components of a pinned handle's offset ``d`` (3-vector) from its target:
+    ``"xyz"`` all, ``"xy"`` the horizontal ones (the height implied: a cyclic end), ``("zn",
+    heading)`` the height and the horizontal component across a foot of that heading (rad)."""
+    if rows == "xyz":
+        return d
+    if rows == "xy":
+        return d[:2]
+    c, s_ = np.cos(rows[1]), np.sin(rows[1])
+    return ca.vertcat(d[2], -s_ * d[0] + c * d[1])
 
 
 def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
@@ -449,7 +480,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
 
     # contacts: (handle, k) pairs planted by footsteps, λ per pair
     planted = []  # (handle, k, target xy expr, step index): contact force at grid point k
-    pins = []  # (handle, s, target xy expr[, "xy"]): footstep position constraints
+    pins = []  # (handle, s, target xy expr, rows, step index): footstep position constraints (rows: _pin_rows)
     zero_force = set()  # planted pairs at a touch-down or lift-off inside the motion (dense: λ = 0)
     seam = ({h for st in sp.footsteps for h, (ta, tb), _ in contact_points(ch, st) if ta <= m.start + 1e-9 <= tb + 2e-9},
             {h for st in sp.footsteps for h, (ta, tb), _ in contact_points(ch, st) if ta - 2e-9 <= m.end - 1e-9 <= tb})
@@ -469,12 +500,13 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             span = s_con[(s_con >= sa - 1e-9) & (s_con <= sb + 1e-9)]
             for v, dep in zip(span, _depend_on_free(K, span, mask, warp_free)):
                 if dep:
-                    pins.append((handle, float(v), xy))
+                    pins.append((handle, float(v), xy, "xyz", si))
                 elif si in free_steps and si not in anchored:
-                    pins.append((handle, float(v), xy))
+                    pins.append((handle, float(v), xy, "xyz", si))
                     anchored.add(si)
     if sp.cyclic:
         pins = _drop_cyclic_duplicates(pins)
+    pins = _heel_implied_along_foot(pins, {si: st.heading for si, st in enumerate(sp.footsteps)})
     n_lam = 4 * len(planted) if sp.dynamics != "kinematic" else 0
     xL = ca.MX.sym("L", n_lam)
     Vc = _contact_bases(sp, ch, planted if n_lam else [])  # friction pyramid per planted pair
@@ -617,7 +649,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         for c, pn in enumerate(pins):
             d = (HPp[3 * hk_names.index(pn[0]):3 * hk_names.index(pn[0]) + 3, c]
                  - ca.vertcat(pn[2][0], pn[2][1], sp.ground.z(pn[2][0], pn[2][1])))
-            rows.append(d[:2] if len(pn) > 3 else d)  # "xy": the height is implied (cyclic end)
+            rows.append(_pin_rows(d, pn[3]))
         add("footstep", ca.vertcat(*rows), 0.0, 0.0)
     if sp.soft_pin_hz > 0 and pins:
         # soft footprints between the hard points: least squares (Gauss–Newton friendly),
@@ -657,7 +689,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
                                        for h in CONTACT_HANDLES])
     # a handle pinned to the ground at a point already has its height fixed there: a second,
     # identical (active) row would make the constraint Jacobian rank-deficient
-    pinned_z = {(pn[0], round(pn[1], 9)) for pn in pins if len(pn) == 3}
+    pinned_z = {(pn[0], round(pn[1], 9)) for pn in pins if pn[3] != "xy"}
     keep = [k * len(CONTACT_HANDLES) + i for k, v in enumerate(s_gnd) for i, h in enumerate(CONTACT_HANDLES)
             if (h, round(float(v), 9)) not in pinned_z]
     add("penetration", ca.vec(ground)[keep], 0.0, np.inf, "ineq")
