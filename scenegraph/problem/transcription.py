@@ -313,7 +313,7 @@ def _node_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
         for _, (ta, tb), _ in contact_points(ch, step, None, sp.ground):
             ends += [t for t in (ta, tb) if m.start < t < m.end]
     ends += [t for fa, fb in sp.flights for t in (fa, fb) if m.start < t < m.end]
-    if sp.shoe_gate and not sp.flights:  # the shoe gate's ramps (scenegraph/model/shoe.py): nodes too
+    if sp.shoe_gate:  # the shoe gate's ramps (scenegraph/model/shoe.py): nodes too
         ends += gate_breaks(ch, sp.footsteps, m.start, m.end, sp.ground)
     ends = np.unique(np.round(m.to_canonical(ends), 12)) if ends else np.zeros(0)
     h = 1.0 / (n_int * r)
@@ -422,10 +422,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     mg = ch.total_mass * G
     mask = window_mask(sp, K) if "q" in sp.free else np.zeros(K, bool)
     warp_free = "warp" in sp.free
-    # a jump's declared flights (sp.flights) keep the round-8 transcription for now: densely the
-    # broad_jump's full step ended "acceptable" with its stance 1.2 bw out of balance (measured;
-    # not yet understood) — see docs/formulation.md
-    dense = sp.dense_dynamics and sp.dynamics != "kinematic" and not sp.flights
+    dense = sp.dense_dynamics and sp.dynamics != "kinematic"
     s = (_node_grid if dense else _collocation_grid)(sp, ch, sp.collocation_hz)
     # footsteps and ground on the round-8 grid either way (the dense nodes are the dynamics')
     s_con = _collocation_grid(sp, ch, max(sp.constraint_hz, sp.collocation_hz)) if dense or \
@@ -555,7 +552,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
 
     TH_ev, SA_ev = ca.mtimes(TH, _sparse(Mev)), ca.mtimes(SA, _sparse(Mev))  # style linear between nodes
     TH_k = TH_ev
-    if sp.shoe_gate and sp.dynamics != "kinematic" and not sp.flights:
+    if sp.shoe_gate and sp.dynamics != "kinematic":
         # the shoe springs only in planned heel contact (scenegraph/model/shoe.py): the kernel's own
         # (everywhere) is switched off and the gated one enters as a vertical force at each heel
         keep_rows = np.ones(N_THETA)

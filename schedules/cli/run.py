@@ -159,7 +159,7 @@ def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, re
 
     from schedules.execution.checkpoints import RunLock, atomic_write_text
     from schedules.execution.executor import run_fingerprint
-    from schedules.execution.run_audit import allowed_contacts, audit_run_stage, jumps
+    from schedules.execution.run_audit import allowed_contacts, audit_run_stage
 
     with RunLock(rdir):  # one writer per run folder, held until the report is written
         scene = build_scene(scn)
@@ -172,7 +172,7 @@ def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, re
         audits = {}
         for c in final.characters:
             a = audit_motion(c.character, c.style, c.motion, c.footsteps, result.contact_forces.get(c.name),
-                             ground=final.ground, shoe_gate=not jumps(final, c.name))
+                             ground=final.ground)
             audits[c.name] = a.to_dict()
             audits[c.name]["tolerances"] = dict(AUDIT_TOLERANCES)
             audits[c.name]["passes"] = a.passes(**AUDIT_TOLERANCES)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AUDIT_FPS", "allowed_contacts", "audit_run_stage", "force_arrows", "jumps"]
+__all__ = ["AUDIT_FPS", "allowed_contacts", "audit_run_stage", "force_arrows"]
 
 AUDIT_FPS = 120.0
 
@@ -37,12 +37,6 @@ def allowed_contacts(scene) -> list[str]:
         if pair is not None:
             out.append(f"{prim(pair[0])}/*~{prim(pair[1])}/*")
     return sorted(set(out))
-
-
-def jumps(scene, who: str) -> bool:
-    """Whether ``who`` has a goal with a declared flight (a jump): its subproblems keep the
-    round-8 transcription, shoe springs everywhere (scenegraph/problem/transcription.py)."""
-    return any(getattr(g, "flight", None) is not None and getattr(g, "character", None) == who for g in scene.goals)
 
 
 def _interp_runs(times: np.ndarray, ht: np.ndarray, hf: np.ndarray) -> np.ndarray:
@@ -105,8 +99,6 @@ def force_arrows(scene, contact_forces: dict, fps: float) -> list:
         from scenegraph.model.shoe import shoe_force_numeric, shoe_gate
         k_shoe, h_rest = float(c.style.k_shoe), float(c.style.h_rest)
         gate = shoe_gate(c.character, c.footsteps, times, c.motion.start, c.motion.end, scene.ground)
-        if jumps(scene, c.name):  # solved with the shoe springs everywhere
-            gate = np.ones_like(gate)
         for i, side in enumerate(("l", "r")):
             h = c.character.handle(f"heel_{side}")
             bi = names.index(h.body)
