@@ -116,6 +116,11 @@ class Subproblem:
     soft_pin_weight: float = 1e5  # total weight, shared by the soft points
     soft_ground_hz: float = 0.0  # one-sided ground penalty on a dense grid (0: off)
     soft_ground_weight: float = 1e6  # total weight, shared by the dense points
+    stance_frame_weight: float = 0.0  # 1/(rad²·s): a planted foot keeps its footstep's yaw and roll
+    # (scenegraph/problem/stance_frame.py; 0: off; full dynamics only)
+    no_slip_weight: float = 0.0  # s/m²: foot handles near the floor do not move horizontally
+    # (scenegraph/problem/no_slip.py; 0: off; full dynamics only)
+    contact_hz: float = 120.0  # samples per second of those two terms (world s of the initial motion)
     window_only: bool = False  # transcribe only the collocation points the window's free control
     # points reach (a window's cost independent of the scene's length); receding windows use it —
     # in walk_to_run's first window it ended "Error in step computation" where the whole-scene

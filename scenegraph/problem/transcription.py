@@ -73,6 +73,8 @@ from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
 from scenegraph.problem.flight import flight_constraints, flight_groups
+from scenegraph.problem.no_slip import no_slip_residuals
+from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
 __all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
@@ -674,6 +676,20 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             depth = ca.vertcat(*[ca.fmin(HPg[3 * hk_names.index(h) + 2, :] - sp.ground.z(
                 HPg[3 * hk_names.index(h), :], HPg[3 * hk_names.index(h) + 1, :]), 0.0) for h in CONTACT_HANDLES])
             rho_extra.append(np.sqrt(sp.soft_ground_weight / depth.shape[0]) * depth)
+    if sp.dynamics == "full" and (sp.stance_frame_weight > 0 or sp.no_slip_weight > 0):
+        # contact semantics between the points (stance_frame.py, no_slip.py): time integrals on a
+        # dense grid, samples where a free control point (or the free warp) moves the pose or velocity
+        n_d = max(2, int(round(m.duration * sp.contact_hz)) + 1)
+        dense = np.linspace(0.0, 1.0, n_d)
+        dense = dense[_touches_free(K, dense, mask) | warp_free]
+        dt_d = m.duration / (n_d - 1)
+        if sp.stance_frame_weight > 0 and len(dense):
+            r = stance_frame_residuals(ch, sp.footsteps, sp.ground, m.time(dense), dense, dt_d, P, K,
+                                       sp.stance_frame_weight)
+            if r is not None:
+                rho_extra.append(r)
+        if sp.no_slip_weight > 0 and len(dense):
+            rho_extra.append(no_slip_residuals(ch, sp.ground, dense, dt_d, P, warp, K, nW, sp.no_slip_weight))
     # ground non-penetration of every foot handle at every point
     s_gnd = s_con if sp.ground_hz <= 0 else \
         np.unique(np.r_[s_con, np.linspace(0, 1, max(2, int(round(m.duration * sp.ground_hz)) + 1))])

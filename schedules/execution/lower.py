@@ -39,6 +39,8 @@ from scenegraph.model.clearance import CLEARANCE_WEIGHT
 from scenegraph.problem.joint import JointCoupling, coupling_times
 from scenegraph.model.motion import Motion
 from scenegraph.problem import HandleTarget, PoseTarget, Subproblem, window_mask
+from scenegraph.problem.no_slip import NO_SLIP_WEIGHT
+from scenegraph.problem.stance_frame import STANCE_FRAME_WEIGHT
 from scenegraph.world.clearance import scene_clearance
 from scenegraph.world.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.model.style import Style
@@ -174,6 +176,10 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
                     window_only=step.role == "receding", fix_end_time=fix_end, end_time_bounds=end_bounds,
                     label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS,
                     soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
+                    # contact semantics at 120 Hz (issue 15 item 3): planted feet keep their frame,
+                    # handles near the floor do not slide (timing steps and pre-solves: off)
+                    stance_frame_weight=STANCE_FRAME_WEIGHT if step.kind == FULL else 0.0,
+                    no_slip_weight=NO_SLIP_WEIGHT if step.kind == FULL else 0.0, contact_hz=SOFT_PIN_HZ,
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
                     # a dense grid too, as synthesize does for runs — between the 30 Hz points a
                     # toe dipped 11–15 mm (audit gate 10 mm)
