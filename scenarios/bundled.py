@@ -17,7 +17,7 @@ from pathlib import Path
 from scenarios.errors import InputError, Location
 from scenarios.names import is_style_path, suggest
 
-__all__ = ["BUNDLED_DIR", "STYLES_DIR", "BUILTIN_STYLES", "bundled_scenarios", "bundled_styles",
+__all__ = ["BUNDLED_DIR", "STYLES_DIR", "BUILTIN_STYLES", "bundled_scenarios", "bundled_syntheses", "bundled_styles",
            "find_scenario", "resolve_style", "style_problem", "allowed_roots", "describe_scenario"]
 
 BUNDLED_DIR = Path(__file__).resolve().parent
@@ -37,6 +37,18 @@ def bundled_scenarios() -> dict[str, Path]:
     """Name → file of every bundled scenario, sorted by name."""
     files = sorted(p for p in BUNDLED_DIR.glob("*.yaml") if p.is_file())
     return {p.stem: p for p in files}
+
+
+def bundled_syntheses() -> dict[str, Path]:
+    """Name → file of every bundled scenario that synthesises characters (every one without a
+    top-level ``edit:`` block, which edits a captured clip instead: scenarios/edit_block.py)."""
+    from scenarios.yamlio import load_yaml
+    out = {}
+    for name, p in bundled_scenarios().items():
+        data, _ = load_yaml(p)
+        if not (isinstance(data, dict) and "edit" in data):
+            out[name] = p
+    return out
 
 
 def bundled_styles() -> dict[str, Path | None]:

@@ -135,7 +135,12 @@ def scenario_json_schema() -> dict:
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     props = schema.setdefault("properties", {})
     props["repeat"] = REPEAT_JSON_SCHEMA
-    # characters may be an empty list when repeat blocks add them (validated after expansion)
-    if isinstance(props.get("characters"), dict) and props["characters"].pop("minItems", None):
-        schema["anyOf"] = [{"required": ["repeat"]}, {"properties": {"characters": {"minItems": 1}}}]
+    # an edit scenario (scenarios/edit_block.py) has an `edit` block and none of a synthesis's fields;
+    # a synthesis needs a duration and characters (possibly an empty list when repeat blocks add
+    # them: validated after expansion)
+    synthesis = {"required": ["duration", "characters"], "not": {"required": ["edit"]},
+                 "anyOf": [{"required": ["repeat"]}, {"properties": {"characters": {"minItems": 1}}}]}
+    from scenarios.edit_block import EDIT_EXCLUDES
+    edit = {"required": ["edit"], "not": {"anyOf": [{"required": [f]} for f in EDIT_EXCLUDES]}}
+    schema["oneOf"] = [synthesis, edit]
     return schema

@@ -29,6 +29,7 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr,
                       ValidationInfo, field_validator, model_validator)
 
 from scenarios.bundled import resolve_style, style_problem
+from scenarios.edit_block import EditBlock, edit_problems
 from scenarios.names import is_style_path, suggest
 from scenarios.weights import AVOID_WEIGHT, TARGET_WEIGHT
 
@@ -52,7 +53,7 @@ __all__ = [
     "Goal", "FootprintsGoal", "Footprint", "WalkToGoal", "ReachGoal", "TackleGoal", "AvoidGoal", "StyleChangeGoal",
     "JumpGoal", "HopGoal", "KeyframesGoal", "LeapEnd", "Keyframe", "leap_sequence",
     "Coupling", "HandHold", "Carry", "HandleRef", "ScheduleSpec", "SCHEDULE_KINDS",
-    "FieldProblem", "BODY_PRESETS", "HANDLE_NAMES", "JOINT_DOF_NAMES", "JOINT_NAMES", "ADVERSARIAL_GOALS",
+    "EditBlock", "FieldProblem", "BODY_PRESETS", "HANDLE_NAMES", "JOINT_DOF_NAMES", "JOINT_NAMES", "ADVERSARIAL_GOALS",
     "joint_dofs", "is_style_path", "suggest",
 ]
 
@@ -730,17 +731,21 @@ class Scenario(_Model):
     version: Literal[1] = Field(1, description="scenario format version")
     name: Name = Field(description="scenario name")
     description: str = Field("", max_length=200, description="one line shown by `compose list`")
-    duration: Num = Field(gt=0.0, le=600.0, description="length of the scenario (s); with free timing the initial guess")
+    duration: Num | None = Field(None, gt=0.0, le=600.0, description="length of the scenario (s); with free timing "
+                                                                  "the initial guess (required, except with `edit`)")
     timing: Literal["fixed", "free"] = Field(
         "fixed", description="free: the timewarp may stretch the whole scenario within duration_bounds; "
                              "goal times are then canonical (they move with the motion)")
     duration_bounds: tuple[Num, Num] | None = Field(None, description="[min, max] total duration (s) with free timing; "
                                                                       "default [0.5, 2] × duration")
     environment: Environment = Field(default_factory=Environment)
-    characters: list[CharacterSpec] = Field(min_length=1, max_length=16)
+    characters: list[CharacterSpec] = Field(default_factory=list, max_length=16,
+                                            description="at least one (required, except with `edit`)")
     goals: list[Goal] = Field(default_factory=list, max_length=MAX_GOALS)
     couplings: list[Coupling] = Field(default_factory=list, max_length=100)
     schedule: ScheduleSpec | None = Field(None, description="explicit schedule; default: compiled from the scenario")
+    edit: EditBlock | None = Field(None, description="edit a captured jump instead (scenarios/edit_block.py): "
+                                                     "no characters, goals, couplings, schedule or duration then")
 
     _base_dir: Path | None = PrivateAttr(None)
     _source: str | None = PrivateAttr(None)
@@ -767,6 +772,11 @@ class Scenario(_Model):
             if c.name == name:
                 return c
         raise KeyError(name)
+
+    @property
+    def is_edit(self) -> bool:
+        """An edit of a captured clip (``edit:`` block), not a synthesis of characters."""
+        return self.edit is not None
 
     @property
     def character_names(self) -> list[str]:
@@ -1012,7 +1022,15 @@ class Scenario(_Model):
     def problems(self, context: dict | None = None) -> list[tuple[tuple, str]]:
         """Every cross-field problem as (field path, message), in file order."""
         ctx = context or {}
+        if self.edit is not None:  # an edit scenario: the clip gives everything else
+            return edit_problems(self.edit, set(self.model_fields_set), ctx)
         out: list[tuple[tuple, str]] = []
+        if self.duration is None:
+            return [(("duration",), "missing required field 'duration'")]
+        if "characters" not in self.model_fields_set:
+            return [(("characters",), "missing required field 'characters'")]
+        if not self.characters:
+            return [(("characters",), "List should have at least 1 item (a scenario needs a character)")]
         T = self.duration
         if self.duration_bounds is not None:
             lo, hi = self.duration_bounds

@@ -229,6 +229,9 @@ def adversarial_plans_last(scn: Scenario) -> dict[frozenset, str]:
 
 def build_scene(scn: Scenario) -> Scene:
     """The initial Scene of a scenario (see the module docstring)."""
+    if scn.is_edit:
+        raise InputError("an edit scenario has no scene to build: it edits its clip (scenarios/edit_block.py)",
+                         scn.location(("edit",)))
     T = float(scn.duration)
     chars, refs = [], {}
     last = adversarial_plans_last(scn)

@@ -111,7 +111,8 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
     if not (0 < fps <= 1000):
         raise InputError(f"--fps must be in (0, 1000], got {fps}")
     scn = load_scenario(name_or_file)
-    check_scenario(scn)
+    if not scn.is_edit:
+        check_scenario(scn)
     source = Path(find_scenario(name_or_file))
     out_path = _check_output(out, Path(f"{scn.name}.usda"))
     rdir = Path(run_dir) if run_dir else Path("runs") / scn.name
@@ -120,6 +121,11 @@ def run_scenario(name_or_file: str, *, out: str | None = None, report: str | Non
         raise InputError(f"--report {report_path}: is a directory")
     if report and not (report_path.parent if str(report_path.parent) else Path(".")).is_dir():
         raise InputError(f"--report {report_path}: folder {report_path.parent} does not exist")
+    if scn.is_edit:  # an edit of a captured clip (scenarios/edit_block.py): no schedule, no solver
+        from schedules.execution.checkpoints import RunLock
+        from schedules.execution.edit_run import run_edit
+        with RunLock(rdir):
+            return run_edit(scn, source, out_path, report_path, fps, log)
 
     schedule = compile_schedule(scn)
     sched = _open_scheduler(scheduler, jobs)  # before anything is written: unreachable -> exit 2

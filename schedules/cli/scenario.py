@@ -20,6 +20,9 @@ def check_scenario(scn: Scenario) -> None:
     schedule compiles (every Step's window at least ``compiler.MIN_WINDOW`` wide)."""
     from scenegraph.model.style import load_style  # schedules may import scenegraph
 
+    if scn.is_edit:  # the clip was checked by the language (scenarios/edit_block.py); nothing to compile
+        return
+
     refs = [(("characters", i, "style"), c.style) for i, c in enumerate(scn.characters)]
     refs += [(("goals", j, "style"), g.style) for j, g in enumerate(scn.goals) if isinstance(g, StyleChangeGoal)]
     checked: set[Path] = set()
@@ -49,8 +52,11 @@ def _validate(args) -> int:
             print(f"compose: error: {exc}", file=sys.stderr)
             continue
         if not args.quiet:
-            print(f"ok: {name} (scenario {scn.name!r}: {len(scn.characters)} character(s), "
-                  f"{len(scn.goals)} goal(s), {len(scn.couplings)} coupling(s), {scn.duration:g} s)")
+            if scn.is_edit:
+                print(f"ok: {name} (scenario {scn.name!r}: an edit of {scn.edit.clip})")
+            else:
+                print(f"ok: {name} (scenario {scn.name!r}: {len(scn.characters)} character(s), "
+                      f"{len(scn.goals)} goal(s), {len(scn.couplings)} coupling(s), {scn.duration:g} s)")
     return 2 if bad else 0
 
 

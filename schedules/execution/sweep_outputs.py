@@ -38,7 +38,11 @@ def summary_row(index: int, assignment, outcome: dict) -> dict:
         row["error"] = outcome.get("error", "")
         return row
     row["status"] = "passes" if rep.get("passes") else "fails"
-    row["energy"] = sum(c["energy"] for c in rep["characters"].values())
+    if "edit" in rep:  # an edit scenario (schedules/execution/edit_run.py): no solver, no energy
+        for k in ("momentum_corr", "parabola_rms_mm", "naive_parabola_rms_mm", "ang_mom_drift", "edit_seconds"):
+            row[k] = rep.get(k)
+    else:
+        row["energy"] = sum(c["energy"] for c in rep["characters"].values())
     row["seconds"] = rep.get("total_seconds")
     for n, e in {**rep.get("goals", {}), **rep.get("couplings", {})}.items():
         row[f"{n}.measured"] = e.get("measured")

@@ -577,6 +577,9 @@ def _check_hard_couplings(scn: Scenario, steps: list[Step]) -> None:
 
 def compile_schedule(scn: Scenario) -> Schedule:
     """The Schedule of a scenario: independent branches of timewarp-scheduled subproblems."""
+    if scn.is_edit:  # scenarios/edit_block.py: `compose run` edits the clip, nothing is scheduled
+        raise InputError("an edit scenario has no schedule: it edits its clip (compose run executes the edit)",
+                         scn.location(("edit",)))
     st = _structure(scn)
     kind = st.spec.kind
     notes: list[str] = []

@@ -156,7 +156,10 @@ def _set(data: Any, path: tuple, value: Any, file: str, positions: dict, label: 
 
 
 def _absolute_styles(data: dict, base: Path) -> None:
-    """Relative style file references → absolute (a variant file lives in the sweep folder)."""
+    """Relative style file and edit clip references → absolute (a variant file lives in the sweep folder)."""
+    e = data.get("edit")
+    if isinstance(e, dict) and isinstance(e.get("clip"), str) and not Path(e["clip"]).is_absolute():
+        e["clip"] = str((base / e["clip"]).resolve())
     for c in data.get("characters", []) or []:
         if isinstance(c, dict):
             for key in ("style", "styles"):

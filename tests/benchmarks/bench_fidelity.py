@@ -52,7 +52,7 @@ def produce(name: str, stages: Path, jobs: int) -> tuple[Path | None, str]:
 
 
 def main(argv=None) -> int:
-    from scenarios.bundled import bundled_scenarios
+    from scenarios.bundled import bundled_syntheses
     from scenegraph.stage_audit import AuditSettings, audit_stage
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--stages", default=str(ROOT / "runs" / "fidelity"), help="folder of stages (made if missing)")
@@ -61,7 +61,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     stages = Path(args.stages)
     stages.mkdir(parents=True, exist_ok=True)
-    names = sorted(bundled_scenarios()) if not args.scenes else [s.strip() for s in args.scenes.split(",") if s.strip()]
+    names = sorted(bundled_syntheses()) if not args.scenes else [s.strip() for s in args.scenes.split(",") if s.strip()]
     worst = {k: 0.0 for k in KEYS}
     passing = 0
     for name in names:

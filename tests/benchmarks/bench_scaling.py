@@ -136,7 +136,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     tmp = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_scaling."))
     tmp.mkdir(parents=True, exist_ok=True)
-    from scenarios.bundled import bundled_scenarios
+    from scenarios.bundled import bundled_syntheses
     from scenegraph.model.body import make_character
     from scenegraph.model.residual import compiled_kernel
     compiled_kernel(make_character())  # fill the compiled-code cache before timing anything
@@ -153,7 +153,7 @@ def main(argv=None) -> None:
         chains.append(run(f.stem, str(f), tmp))
     runs += walks + chains
     if not args.skip_bundled:
-        runs += [run(name, name, tmp) for name in bundled_scenarios()]
+        runs += [run(name, name, tmp) for name in bundled_syntheses()]
     eps = [w["energy_per_s"] for w in walks]
     spread = max(eps) / min(eps) if all(np.isfinite(eps)) and min(eps) > 0 else math.nan
     capped = sum(r["capped"] for r in runs)

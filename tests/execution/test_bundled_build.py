@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenarios.bundled import bundled_scenarios
+from scenarios.bundled import bundled_syntheses
 from scenarios.loader import load_scenario
 from scenegraph.problem import transcribe
 from scenegraph.world.scene import build_scene
@@ -28,7 +28,7 @@ def _shape(step, sp) -> tuple:
             sp.fix_end_time, bool(sp.targets))
 
 
-@pytest.mark.parametrize("name", sorted(bundled_scenarios()))
+@pytest.mark.parametrize("name", sorted(bundled_syntheses()))  # an edit scenario has no steps
 def test_every_step_of_a_bundled_scenario_lowers_and_transcribes(name):
     scn = load_scenario(name)
     schedule = compile_schedule(scn)

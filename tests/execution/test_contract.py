@@ -19,7 +19,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from scenarios.bundled import bundled_scenarios
+from scenarios.bundled import bundled_scenarios, bundled_syntheses
 from scenarios.errors import ComposeError, InputError
 from scenarios.loader import load_scenario, parse_scenario
 from scenegraph.model.dynamics import friction_basis
@@ -41,7 +41,7 @@ def _variant(name: str, extra: str = "", replace_: tuple[str, str] | None = None
 
 
 def _variants():
-    yield from (load_scenario(n) for n in sorted(bundled_scenarios()))
+    yield from (load_scenario(n) for n in sorted(bundled_syntheses()))  # edits: tests/language/test_edit_block.py
     yield load_scenario(str(FULL_YAML))
     for kind in ("timewarp", "time_layered", "coupled", "decreasing_horizon"):
         yield _variant("handhold", f"schedule:\n  kind: {kind}\n  cycles: 1\n")

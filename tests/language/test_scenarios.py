@@ -54,6 +54,9 @@ def test_bundled_scenario_validates(name):
     check_scenario(scn)
     assert scn.name == name
     assert scn.description, "bundled scenarios need a one-line description for `compose list`"
+    if scn.is_edit:  # an edit of a captured clip: no characters, no duration (tests/language/test_edit_block.py)
+        assert scn.edit.clip.startswith("clips/") and not scn.characters
+        return
     assert 1.0 <= scn.duration <= 2.0, "keep bundled scenarios short so they run end to end quickly"
     for c in scn.characters:
         assert c.style in bundled_styles(), f"{name}: style {c.style!r} is not shipped"
@@ -154,7 +157,9 @@ def test_full_scenario_uses_every_field():
     every = {(c.__name__, f) for c in classes for f in c.model_fields}
     used: set = set()
     _used_fields(scn, used)
-    assert not sorted(every - used), f"tests/scenarios/full.yaml does not use {sorted(every - used)}"
+    edit = load_scenario(FULL.parent / "full_edit.yaml")  # an edit scenario's fields exclude the others'
+    _used_fields(edit, used)
+    assert not sorted(every - used), f"tests/scenarios/full.yaml and full_edit.yaml do not use {sorted(every - used)}"
     # style paths resolve against the scenario's folder, not the working directory
     assert scn.style_file("custom.style.yaml") == (FULL.parent / "custom.style.yaml").resolve()
 

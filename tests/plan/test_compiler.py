@@ -8,6 +8,7 @@ import networkx as nx
 import pytest
 
 from scenarios import bundled_scenarios, load_scenario, parse_scenario
+from scenarios.bundled import bundled_syntheses
 from schedules import (COUPLED, DECREASING_HORIZON, JOINT, TIME_LAYERED, TIMEWARP, Schedule, Step,
                        compile_schedule)
 from schedules.cli.main import main
@@ -62,7 +63,14 @@ KINDS = [
 
 
 def test_every_bundled_scenario_has_a_row():
-    assert {row[0] for row in KINDS} == set(bundled_scenarios())
+    assert {row[0] for row in KINDS} == set(bundled_syntheses())
+    assert set(bundled_scenarios()) - set(bundled_syntheses()) == {"edit_broad_jump"}  # edits have no schedule
+
+
+def test_an_edit_scenario_has_no_schedule():
+    with pytest.raises(Exception) as e:
+        compile_schedule(load_scenario("edit_broad_jump"))
+    assert "edit_broad_jump.yaml:" in str(e.value) and "has no schedule" in str(e.value)
 
 
 @pytest.mark.parametrize("name,kinds,branches", KINDS)
@@ -73,7 +81,7 @@ def test_kinds_chosen(name, kinds, branches):
     assert nx.number_weakly_connected_components(s.graph) == branches
 
 
-@pytest.mark.parametrize("name", list(bundled_scenarios()) + [str(FULL)])
+@pytest.mark.parametrize("name", list(bundled_syntheses()) + [str(FULL)])  # an edit has no schedule
 def test_general_properties(name):
     s = _compile(name)
     g = s.graph

@@ -12,7 +12,7 @@ import casadi as ca
 import numpy as np
 
 from scenegraph.mocap.momentum_edit import body_momenta
-from scenegraph.model.body import G, N_DOF, default_character, standing_pose
+from scenegraph.model.body import G, N_DOF, default_character, make_character, standing_pose
 from scenegraph.problem.flight import flight_constraints, momenta_fn
 
 
@@ -52,6 +52,50 @@ def test_the_equalities_vanish_on_a_ballistic_motion_only():
     g = flight_constraints(ch, groups, ca.DM(q.T), ca.DM(qd.T), ca.DM(t[None, :]))
     g = np.asarray(ca.evalf(g)).ravel()
     assert g.shape == (6 * (len(t) - 1),) and np.abs(g).max() < 1e-9
-    qd[:, 2] = v0[2]  # the same speed without gravity: the linear momentum rows are violated by M g t
+    qd[:, 2] = v0[2]  # the same speed without gravity: the linear momentum rows are violated by g t (per kg)
     g = np.asarray(ca.evalf(flight_constraints(ch, groups, ca.DM(q.T), ca.DM(qd.T), ca.DM(t[None, :])))).ravel()
-    assert abs(np.abs(g).max() - ch.total_mass * G * t[-1]) < 1e-6
+    assert abs(np.abs(g).max() - G * t[-1]) < 1e-9
+
+
+def _rows(ch, q, qd, t):
+    g = flight_constraints(ch, [np.arange(len(t))], ca.DM(q.T), ca.DM(qd.T), ca.DM(t[None, :]))
+    g = np.asarray(ca.evalf(g)).ravel()
+    n = len(t) - 1
+    return np.c_[g[:3 * n].reshape(n, 3), g[3 * n:].reshape(n, 3)]  # per point: 3 linear, 3 angular rows
+
+
+def test_rows_are_per_kilogram_for_a_heavy_and_a_light_character():
+    """The rows are the change of momentum per kilogram (m/s, m²/s): O(1) for a 70 kg adult and
+    a 30 kg child alike, and equal for the same motion of the same body at another mass."""
+    t = np.linspace(0.0, 0.4, 9)
+    rows = {}
+    for preset, mass in (("adult_male", 70.0), ("child", 30.0), ("adult_male", 30.0)):
+        ch = make_character(preset, mass=mass)
+        assert abs(ch.total_mass - mass) < 1e-6
+        q, qd = _motion(ch, t)  # not ballistic: every joint swings, the root does not fall
+        r = _rows(ch, q, qd, t)
+        # the linear rows: the centre of mass's velocity change plus g t, m/s (checked independently)
+        c_n, P_n, H_n, _ = body_momenta(ch, *_motion(ch, np.arange(0.0, 0.4 + 1e-9, 1e-4))[:1], 1e4)
+        k = np.round(t / 1e-4).astype(int)
+        v = P_n[k] / mass
+        expect = v[1:] - v[0] + np.outer(t[1:] - t[0], [0.0, 0.0, G])
+        assert np.allclose(r[:, :3], expect, atol=2e-3), (r[:, :3], expect)
+        assert 0.05 < np.abs(r).max() < 20.0  # O(1): neither negligible nor hundreds
+        assert 1e-3 < np.abs(r[:, 3:]).max() < 5.0
+        rows[preset, mass] = r
+    # same stature, same motion, another mass: the centre of mass moves the same, so the linear rows
+    # per kg are equal; the angular ones nearly (segment inertias are ellipsoids of the segment's
+    # mass at 1000 kg/m³: a lighter body is slimmer, not just lighter)
+    a, b = rows["adult_male", 70.0], rows["adult_male", 30.0]
+    assert np.allclose(a[:, :3], b[:, :3], atol=1e-9)
+    assert np.abs(a[:, 3:] - b[:, 3:]).max() < 0.1 * np.abs(a[:, 3:]).max()
+    assert not np.allclose(rows["adult_male", 70.0], rows["child", 30.0], atol=1e-3)
+    # and thrown ballistically, both bodies satisfy the rows
+    for preset, mass in (("adult_male", 70.0), ("child", 30.0)):
+        ch = make_character(preset, mass=mass)
+        q = np.tile(standing_pose(ch), (len(t), 1))
+        v0 = np.array([1.5, 0.0, 2.5])
+        q[:, :3] += np.outer(t, v0) - np.outer(t ** 2 / 2, [0.0, 0.0, G])
+        qd = np.zeros_like(q)
+        qd[:, :3] = v0 - np.outer(t, [0.0, 0.0, G])
+        assert np.abs(_rows(ch, q, qd, t)).max() < 1e-9
