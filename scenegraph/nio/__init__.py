@@ -6,14 +6,15 @@ is the energy-optimal motion (Eq. 16).  It minimises (Eq. 17–19)
     G(θ) + D(θ),   G(θ) = E(X_T; θ) − min_{X ∈ C} E(X; θ),
     D(θ) = w (Σ_j α_j − 1)² + w Σ_j min(α_j, 0)²,   w = 10⁴,
 
-with the energy of the spacetime solver (Eq. 13, same collocation grid and normalisation),
-contact forces profiled out by NNLS, for X_T and every counterexample alike.
+with the energy of the spacetime solver — its NLP objective itself, read from the NIO
+problem's transcription (dense dynamics, gated shoe, λ regularisation) — contact forces
+profiled out by a bound-constrained least squares, for X_T and every counterexample alike.
 
 The package, in the order of the computation (each module imports only those above it):
 
 - :mod:`.theta`: θ by name (``style.THETA_LAYOUT``), its bounds and projection, D (Eq. 18);
 - :mod:`.prior`: the log-normal prior on α and the left/right / joint-group ties (issue #18);
-- :mod:`.energy`: E(X; θ), ∂E/∂θ and the energy-optimal contact forces (``EnergyModel``);
+- :mod:`.energy`: E(X; θ) = the NLP objective, ∂E/∂θ and the energy-optimal contact forces (``EnergyModel``);
 - :mod:`.counterexamples`: X_S by a warm-started IPOPT solve or by one Gauss–Newton step
   from X_T within C (the default: IPOPT's capped solves make G mostly solver error); both
   use the transcription's named layout (``NLP.x_layout``, ``NLP.p_layout``);

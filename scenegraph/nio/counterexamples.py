@@ -25,6 +25,7 @@ import numpy as np
 
 from scenegraph.model.motion import Motion
 from scenegraph.problem import NLP, Built, IterationCallback, Result, Subproblem, make_solver, solve, transcribe, violations
+from scenegraph.nio.energy import nlp_params
 from scenegraph.nio.theta import ALPHA, KERNEL
 
 __all__ = ["WARM_START", "BestIterate", "Counterexamples", "nlp_params"]
@@ -60,17 +61,6 @@ class BestIterate(IterationCallback):
         if f < self.best_f and self.violation(arg[2]) <= self.tol:
             self.best_f, self.best_x = f, np.asarray(arg[0]).ravel().copy()
         return [0]
-
-
-def nlp_params(nlp: NLP, theta: np.ndarray) -> np.ndarray:
-    """The NLP's parameters with style θ (147) at every collocation point."""
-    N = len(nlp.s_points)
-    TH = np.tile(theta[KERNEL, None], (1, N))
-    SA = np.tile(np.sqrt(np.maximum(theta[ALPHA], 0.0))[:, None], (1, N))
-    p = nlp.p0.copy()
-    p[nlp.p_layout["theta"]] = TH.ravel(order="F")
-    p[nlp.p_layout["sqrt_alpha"]] = SA.ravel(order="F")
-    return p
 
 
 @dataclass(frozen=True)

@@ -1,131 +1,216 @@
-"""The energy NIO compares motions by: E(X; θ) of the spacetime solver with λ profiled out.
+"""The energy NIO compares motions by: the spacetime solver's objective, with λ profiled out.
 
-    E(X; θ) = (OBJ_SCALE / m g)² Σ_k w_k T'_k [ Σ_j α_j Q_mj(s_k)² + w_r Σ_i Q_0i(s_k)² ]
-              + (OBJ_SCALE · LAM_REG)² |λ|²
+E(X; θ) is the objective ``NLP.f`` of the NIO problem's own transcription (a q-only
+subproblem of the target, :mod:`scenegraph.problem.transcription`) evaluated at x = (control
+points of X, contact coefficients λ) and p = (θ at every point, the fixed data): not a
+re-implementation of it, so the energy NIO learns with and the one the synthesis minimises
+cannot drift apart.  With the dense dynamics that is
 
-on the collocation grid of the NIO problem's NLP (s_k: canonical time, w_k: trapezoid
-weights, T'_k: the target's timewarp slope, which is fixed because NIO frees q only).  For a
-fixed q the contact coefficients λ ≥ 0 minimising it are found point by point by
-non-negative least squares (the residuals are affine in the contact forces), so E is exactly
-the objective the spacetime solver minimises, with λ profiled out.  Forces F are (24, N):
-3 world-frame components (N) per force handle and collocation point.
+    E = |ρ_dyn|² + |ρ_extra|²,   ρ_dyn = (OBJ_SCALE / m g) √(w_e T'_e) [√α_j Q_mj(s_e); √w_r Q_0i(s_e)]
+
+over the evaluation points s_e (nodes and interval midpoints, Simpson weights w_e; forces
+piecewise linear between nodes, the shoe gated), ρ_extra = OBJ_SCALE · 10⁻³ λ (the solver's
+λ regularisation) and any other least-squares term of the subproblem.  (The round-10 energy
+re-implemented the trapezoid sum at the nodes with the ungated shoe: it overstated E(X_T) by
+21.5 % and G by 19 % on 07_01, measured.)
+
+For a fixed q the residuals are affine in λ, so the λ ≥ 0 minimising E (with the solver's
+λ = 0 at touch-downs and lift-offs) solve one bound-constrained linear least-squares problem
+(:func:`nonneg_lsq`).  Because the per-point style is constant, E is linear in α:
+E = Σ_j α_j A_j + R with A_j the squared joint-j residuals at √α = 1, which gives ∂E/∂α
+exactly, also at α_j = 0; ∂E/∂θ of the other parts is CasADi's gradient of ``NLP.f``
+with respect to p, summed over the points.  Energies are dimensionless (body-weight units
+squared times s); forces F are (24, N): 3 world-frame components (N) per force handle at
+each node.
 """
 from __future__ import annotations
 
-import functools
+from collections import OrderedDict
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
 from scipy.optimize import nnls
 
-from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, Character
-from scenegraph.model.dynamics import friction_basis
+from scenegraph.model.body import G, N_DOF, N_JOINT, Character
 from scenegraph.model.motion import Motion
-from scenegraph.problem import NLP, OBJ_SCALE
-from scenegraph.model.residual import FORCE_HANDLES, W_ROOT, residual_kernel
-from scenegraph.nio.theta import ALPHA, KERNEL, N_THETA_FULL
+from scenegraph.model.residual import FORCE_HANDLES
+from scenegraph.problem import NLP
+from scenegraph.nio.theta import ALPHA, KERNEL
 
-__all__ = ["EnergyModel", "LAM_REG", "force_jacobian"]
-
-LAM_REG = 1e-3  # the solver's λ regularisation (kept for a well-posed contact split)
+__all__ = ["EnergyModel", "nlp_params", "nonneg_lsq"]
 
 
-@functools.lru_cache(maxsize=4)
-def force_jacobian(ch: Character) -> ca.Function:
-    """(q, qd, qdd, f, θ_kernel) -> (Q, ∂Q/∂f): the residual kernel and its force Jacobian."""
-    k = residual_kernel(ch)
-    q, qd, qdd = (ca.SX.sym(n, N_DOF) for n in ("q", "qd", "qdd"))
-    f = ca.SX.sym("f", 3 * len(FORCE_HANDLES))
-    th = ca.SX.sym("th", k.size1_in(4))
-    Q = k(q, qd, qdd, f, th)
-    return ca.Function("dQdf", [q, qd, qdd, f, th], [Q, ca.jacobian(Q, f)])
+def nlp_params(nlp: NLP, theta: np.ndarray, motion: Motion | None = None, unit_alpha: bool = False) -> np.ndarray:
+    """The NLP's parameters with style θ (147) at every point (``unit_alpha``: √α = 1
+    instead) and, given ``motion``, its timewarp as the fixed warp."""
+    N = len(nlp.s_points)
+    p = nlp.p0.copy()
+    p[nlp.p_layout["theta"]] = np.tile(theta[KERNEL, None], (1, N)).ravel(order="F")
+    sa = np.ones(N_JOINT) if unit_alpha else np.sqrt(np.maximum(theta[ALPHA], 0.0))
+    p[nlp.p_layout["sqrt_alpha"]] = np.tile(sa[:, None], (1, N)).ravel(order="F")
+    if motion is not None:
+        w = np.asarray(motion.warp, float)
+        sl = nlp.p_layout["warp_fixed"]
+        if w.size != sl.stop - sl.start:
+            raise ValueError(f"motion has {w.size} timewarp points, the NIO problem {sl.stop - sl.start}")
+        p[sl] = w
+    return p
+
+
+def nonneg_lsq(A: sps.spmatrix, b: np.ndarray, x0: np.ndarray | None = None, max_iter: int = 40,
+               tol: float = 1e-12) -> tuple[np.ndarray, int]:
+    """x ≥ 0 minimising |A x + b|² (A sparse with full column rank), and the iterations used.
+
+    Primal–dual active set (Hintermüller, Ito & Kunisch 2002) on the normal equations, started
+    from the active set of ``x0`` (zeros of a previous solution) or from the unconstrained
+    solution; it stops when the set repeats, which is the KKT point.  If it cycles or runs
+    out of iterations, the exact Lawson–Hanson NNLS on the Cholesky factor is used (returned
+    iterations −1)."""
+    H = (A.T @ A).tocsc()
+    g = np.asarray(A.T @ b).ravel()
+    n = g.size
+    if n == 0:
+        return np.zeros(0), 0
+    sc = tol * max(1.0, float(np.abs(g).max()))
+    active = np.zeros(n, bool) if x0 is None else np.asarray(x0) <= 0.0
+    seen = set()
+    for it in range(1, max_iter + 1):
+        free = np.flatnonzero(~active)
+        x = np.zeros(n)
+        if free.size:
+            x[free] = spla.spsolve(H[free][:, free], -g[free])
+        mu = H @ x + g
+        new = np.where(active, mu > sc, x < -sc)
+        if np.array_equal(new, active):
+            return np.maximum(x, 0.0), it
+        key = new.tobytes()
+        if key in seen:
+            break
+        seen.add(key)
+        active = new
+    Hd = H.toarray()
+    R = np.linalg.cholesky(Hd).T  # H = Rᵀ R: |A x + b|² = |R x + R⁻ᵀ g|² + const
+    x, _ = nnls(R, -np.linalg.solve(R.T, g), maxiter=50 * n)
+    return x, -1
 
 
 class EnergyModel:
-    """E(X; θ), its θ-gradient and the energy-optimal contact forces of a motion, on the
-    collocation grid of ``nlp`` (a transcription of a q-only subproblem of ``target``).
+    """E(X; θ), its θ-gradient and the energy-optimal contact coefficients of a motion, read
+    from ``nlp`` (the transcription of a q-only subproblem of ``target``).
 
-    Attributes: ``N`` collocation points, ``mg`` body weight (N), ``wT`` = w_k T'_k (s),
-    ``c`` the per-point energy weights, ``planted[k]``: (force handle index, λ slice into x)
-    of the planted contacts at point k, ``V`` the friction pyramid (3×4)."""
+    Attributes: ``N`` nodes, ``mg`` body weight (N), ``wT`` = trapezoid weight × T' at the
+    nodes (s; the time weights of :func:`.initial.initial_theta`), ``n_solves`` / ``pdas_fallbacks``
+    counts of λ solves and of those that needed the exact NNLS."""
+
+    CACHE = 64  # per-motion λ Jacobians kept (the bundle holds at most 40 motions)
 
     def __init__(self, ch: Character, nlp: NLP, target: Motion):
         self.ch, self.nlp = ch, nlp
+        lay = nlp.x_layout
+        if any(lay[k].stop > lay[k].start for k in ("warp", "footprints")) or nlp.rho_dyn_fn is None:
+            raise ValueError("NIO's energy needs the NLP of a q-only subproblem (timewarp and footprints held)")
         s = nlp.s_points
-        self.N = N = len(s)
-        wq = np.zeros(N)
+        self.N = len(s)
+        wq = np.zeros(self.N)
         wq[1:] += np.diff(s) / 2
         wq[:-1] += np.diff(s) / 2
+        self.wT = wq * target.time(s, 1)
         self.mg = ch.total_mass * G
-        T1 = target.time(s, 1)  # warp is fixed (free = q): the same for every counterexample
-        self.wT = wq * T1
-        self.c = self.wT * (OBJ_SCALE / self.mg) ** 2
-        self.planted: list[list[tuple[int, slice]]] = [[] for _ in range(N)]
-        for h, k, sl in nlp.contact_index:
-            self.planted[k].append((FORCE_HANDLES.index(h), sl))
-        self.V = friction_basis()
-        self._energy_fn = self._make_energy_fn()
-
-    def _make_energy_fn(self) -> ca.Function:
-        N = self.N
-        th = ca.MX.sym("theta", N_THETA_FULL)
-        q, qd, qdd = (ca.MX.sym(n, N_DOF, N) for n in ("q", "qd", "qdd"))
-        F = ca.MX.sym("F", 3 * len(FORCE_HANDLES), N)
-        alpha = th[ALPHA.start:ALPHA.stop]
-        thk = th[KERNEL.start:KERNEL.stop]
-        QQ = residual_kernel(self.ch).map(N)(q, qd, qdd, F, ca.repmat(thk, 1, N))
-        per = ca.mtimes(alpha.T, QQ[:N_JOINT, :] ** 2) + W_ROOT * ca.sum1(QQ[N_JOINT:, :] ** 2)
-        E = ca.mtimes(per, ca.DM(self.c))
-        return ca.Function("nio_E", [th, q, qd, qdd, F], [E, ca.gradient(E, th)])
+        self._lam = lay["lambda"]
+        self._open = np.flatnonzero(nlp.ubx[self._lam] > 0)  # the others are held at 0 by the solver
+        x, p = nlp.x, nlp.p
+        rho = ca.vertcat(nlp.rho_dyn_fn(x, p), nlp.rho_extra_fn(x, p))
+        self._rho_fn = ca.Function("nio_rho", [x, p], [rho])
+        self._jac_fn = ca.Function("nio_rho_lam", [x, p], [ca.jacobian(rho, x)[:, self._lam]])
+        self._f_fn = ca.Function("nio_E", [x, p], [nlp.f, ca.gradient(nlp.f, p)])
+        n_dyn = int(nlp.rho_dyn_fn.size1_out(0))
+        if n_dyn % N_DOF:
+            raise ValueError("NIO's energy needs a dynamic subproblem (rho_dyn of 35 rows per point)")
+        rows = np.arange(n_dyn) % N_DOF
+        self._joint = np.full(int(rho.shape[0]), -1)  # joint j of each muscle row of ρ, −1 elsewhere
+        self._joint[:n_dyn] = np.where(rows < N_JOINT, rows, -1)
+        self._cache: OrderedDict = OrderedDict()
+        self.n_solves = self.pdas_fallbacks = 0
 
     def states(self, motion: Motion):
-        """(q, q̇, q̈), each (35, N), of ``motion`` at the collocation points."""
+        """(q, q̇, q̈), each (35, N), of ``motion`` at the nodes."""
         q, qd, qdd = motion.state_at_s(self.nlp.s_points)
         return q.T, qd.T, qdd.T
 
-    def forces(self, motion: Motion, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Contact forces (24, N) minimising E for the fixed q of ``motion`` (NNLS per point),
-        and λ in the solver's layout (the NLP's ``x_layout["lambda"]`` block)."""
-        q, qd, qdd = self.states(motion)
-        fn = force_jacobian(self.ch).map(self.N)
-        nf = 3 * len(FORCE_HANDLES)
-        thk = np.tile(theta[KERNEL, None], (1, self.N))
-        Q0, J = fn(q, qd, qdd, np.zeros((nf, self.N)), thk)
-        Q0, J = np.asarray(Q0), np.asarray(J)  # J: (35, 24 N)
-        wsq = np.sqrt(np.r_[np.maximum(theta[ALPHA], 0.0), np.full(N_ROOT, W_ROOT)])
-        F = np.zeros((nf, self.N))
-        lam_slice = self.nlp.x_layout["lambda"]
-        lam = np.zeros(lam_slice.stop - lam_slice.start)
-        off = lam_slice.start
-        for k, pl in enumerate(self.planted):
-            if not pl:
-                continue
-            Jk = J[:, k * nf:(k + 1) * nf]
-            A = np.hstack([Jk[:, 3 * i:3 * i + 3] @ (self.mg * self.V) for i, _ in pl])
-            reg = LAM_REG * self.mg / np.sqrt(max(self.wT[k], 1e-12))
-            AA = np.vstack([wsq[:, None] * A, reg * np.eye(A.shape[1])])
-            bb = np.r_[-wsq * Q0[:, k], np.zeros(A.shape[1])]
-            x, _ = nnls(AA, bb, maxiter=50 * A.shape[1])
-            for c, (i, sl) in enumerate(pl):
-                lk = x[4 * c:4 * c + 4]
-                F[3 * i:3 * i + 3, k] += self.mg * self.V @ lk
-                lam[sl.start - off:sl.stop - off] = lk
-        return F, lam
+    def x_of(self, motion: Motion, lam: np.ndarray | None = None) -> np.ndarray:
+        """The NLP's decision vector of ``motion`` with contact coefficients ``lam`` (default 0)."""
+        x = self.nlp.x0.copy()
+        ctrl = np.asarray(motion.ctrl, float).ravel()
+        sl = self.nlp.x_layout["ctrl"]
+        if ctrl.size != sl.stop - sl.start:
+            raise ValueError(f"motion has {ctrl.size} control values, the NIO problem {sl.stop - sl.start}")
+        x[sl] = ctrl
+        x[self._lam] = 0.0 if lam is None else lam
+        return x
 
-    def energy(self, theta: np.ndarray, motion: Motion, F: np.ndarray,
-               lam: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-        """E(X; θ) for motion q and forces F, and ∂E/∂θ.  With ``lam`` (the contact
-        coefficients of F) the solver's λ regularisation (OBJ_SCALE·LAM_REG)² |λ|² is added:
-        that is the objective the spacetime solver minimises, so X_T is a minimum of this
-        measure under θ* (without it, E(X_T; θ*) is not minimal and G(θ*) > 0)."""
-        E, g = self._energy_fn(theta, *self.states(motion), F)
-        E = float(E)
-        if lam is not None:
-            E += float((OBJ_SCALE * LAM_REG) ** 2 * np.sum(np.asarray(lam) ** 2))
-        return E, np.asarray(g).ravel()
+    def _unit(self, motion: Motion) -> tuple[sps.csc_matrix, np.ndarray]:
+        """(∂ρ/∂λ at √α = 1 over the open λ, the previous λ of this motion): the contact forces
+        enter the residuals through the contact Jacobian only, so at √α = 1 this depends on q
+        alone and is kept per motion."""
+        key = (np.asarray(motion.ctrl, float).tobytes(), np.asarray(motion.warp, float).tobytes())
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        p1 = self.nlp.p0.copy()  # θ of the kernel does not enter ∂ρ/∂λ
+        p1[self.nlp.p_layout["sqrt_alpha"]] = 1.0
+        p1[self.nlp.p_layout["warp_fixed"]] = np.asarray(motion.warp, float)
+        J = sps.csc_matrix(self._jac_fn(self.x_of(motion), p1).sparse())[:, self._open]
+        self._cache[key] = [J, None]
+        while len(self._cache) > self.CACHE:
+            self._cache.popitem(last=False)
+        return self._cache[key]
+
+    def _row_scale(self, theta: np.ndarray) -> np.ndarray:
+        sa = np.sqrt(np.maximum(theta[ALPHA], 0.0))
+        return np.where(self._joint >= 0, sa[np.maximum(self._joint, 0)], 1.0)
+
+    def forces(self, motion: Motion, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Contact forces (24, N) at the nodes minimising E for the fixed q of ``motion``, and
+        λ in the solver's layout (the NLP's ``x_layout["lambda"]`` block)."""
+        entry = self._unit(motion)
+        J1, prev = entry
+        r0 = np.asarray(self._rho_fn(self.x_of(motion), nlp_params(self.nlp, theta, motion))).ravel()
+        S = sps.diags(self._row_scale(theta))
+        lo, it = nonneg_lsq((S @ J1).tocsc(), r0, prev)
+        self.n_solves += 1
+        self.pdas_fallbacks += it < 0
+        entry[1] = lo
+        lam = np.zeros(self._lam.stop - self._lam.start)
+        lam[self._open] = lo
+        return self.force_matrix(lam), lam
+
+    def force_matrix(self, lam: np.ndarray) -> np.ndarray:
+        """(24, N) world forces (N) at the nodes of contact coefficients ``lam`` (m g V λ)."""
+        F = np.zeros((3 * len(FORCE_HANDLES), self.N))
+        off = self._lam.start
+        for (h, k, sl), V in zip(self.nlp.contact_index, self.nlp.contact_basis):
+            i = FORCE_HANDLES.index(h)
+            F[3 * i:3 * i + 3, k] += self.mg * np.asarray(V) @ lam[sl.start - off:sl.stop - off]
+        return F
+
+    def energy(self, theta: np.ndarray, motion: Motion, lam: np.ndarray) -> tuple[float, np.ndarray]:
+        """E(X; θ) = NLP.f at (X, λ = ``lam``) under θ, and ∂E/∂θ at fixed λ."""
+        theta = np.asarray(theta, float)
+        x = self.x_of(motion, lam)
+        E, gp = self._f_fn(x, nlp_params(self.nlp, theta, motion))
+        gp = np.asarray(gp).ravel()
+        g = np.zeros_like(theta)
+        th_sl = self.nlp.p_layout["theta"]
+        g[KERNEL] = gp[th_sl].reshape(KERNEL.stop - KERNEL.start, self.N, order="F").sum(axis=1)
+        r1 = np.asarray(self._rho_fn(x, nlp_params(self.nlp, theta, motion, unit_alpha=True))).ravel()
+        m = self._joint >= 0
+        g[ALPHA] = np.bincount(self._joint[m], weights=r1[m] ** 2, minlength=N_JOINT)
+        return float(E), g
 
     def measure(self, theta: np.ndarray, motion: Motion):
         """(E, ∂E/∂θ, F, λ) of ``motion`` under θ with its energy-optimal contact forces."""
         F, lam = self.forces(motion, theta)
-        E, g = self.energy(theta, motion, F, lam)
+        E, g = self.energy(theta, motion, lam)
         return E, g, F, lam

@@ -42,8 +42,8 @@ def test_style_from_theta_normalises_and_projects():
 def test_energy_gradient_matches_finite_differences(small):
     ch, fs, m, nio = small
     th = nio.initial_theta()
-    F, _ = nio.forces(m, th)
-    E, g = nio.energy(th, m, F)
+    _, lam = nio.forces(m, th)
+    E, g = nio.energy(th, m, lam)
     assert E > 0 and np.all(np.isfinite(g))
     rng = np.random.default_rng(1)
     for i in rng.choice(len(th), 8, replace=False):
@@ -51,18 +51,26 @@ def test_energy_gradient_matches_finite_differences(small):
         tp, tm = th.copy(), th.copy()
         tp[i] += h
         tm[i] -= h
-        fd = (nio.energy(tp, m, F)[0] - nio.energy(tm, m, F)[0]) / (2 * h)
+        fd = (nio.energy(tp, m, lam)[0] - nio.energy(tm, m, lam)[0]) / (2 * h)
         assert fd == pytest.approx(g[i], rel=1e-4, abs=1e-9 * max(1.0, abs(E)))
 
 
 def test_contact_forces_minimise_energy(small):
-    """NNLS forces beat zero forces and a scaled copy of themselves."""
+    """The profiled contact coefficients beat zero forces, scaled copies of themselves and
+    random feasible perturbations; the solver's λ = 0 at touch-down / lift-off is kept."""
     ch, fs, m, nio = small
     th = default_style().vector()
-    F, _ = nio.forces(m, th)
-    E = nio.energy(th, m, F)[0]
-    assert E < nio.energy(th, m, 0 * F)[0]
-    assert E <= nio.energy(th, m, 1.05 * F)[0] + 1e-9
+    F, lam = nio.forces(m, th)
+    E = nio.energy(th, m, lam)[0]
+    assert E < nio.energy(th, m, 0 * lam)[0]
+    for c in (0.95, 1.05):
+        assert E <= nio.energy(th, m, c * lam)[0] + 1e-9 * E
+    rng = np.random.default_rng(3)
+    held = nio.nlp.ubx[nio.nlp.x_layout["lambda"]] == 0
+    assert held.any() and np.all(lam[held] == 0)
+    for _ in range(3):
+        d = np.where(held, 0.0, rng.normal(scale=1e-3, size=lam.size))
+        assert E <= nio.energy(th, m, np.maximum(lam + d, 0.0))[0] + 1e-9 * E
     assert F[2::3].min() >= -1e-9  # normal components push
 
 
