@@ -36,13 +36,13 @@ __all__ = ["NO_SLIP_WEIGHT", "H_NO_SLIP", "phi", "handle_state_fn", "no_slip_res
 
 H_NO_SLIP = 0.010  # m: a handle higher than this above the ground may move freely
 # w_slip, s/m².  A handle on the floor moving at v for τ seconds costs OBJ_SCALE² w v² τ: the
-# 0.1 m/s of a 1 mm glide between two 30 Hz collocation points held for a 0.6 s stance costs
-# 900 · 100 · 0.01 · 0.6 = 540, about a walking gait cycle's whole objective (≈ 440 for 1.2 s);
-# a touch-down skid of 0.3 m/s over its last 5 mm (≈ 20 ms, φ ≈ 0.5 on average) costs ≈ 80; a
-# swing toe crossing the 10 mm band at 6 m/s for 3 ms ≈ 2400 — so the solver removes glides and
-# skids and lifts a swing toe clear of the band rather than pay.  The same number for every
-# gait, body and scene length (module docstring); not tuned to a scene.
-NO_SLIP_WEIGHT = 100.0
+# 0.1 m/s of a 1 mm glide between two 30 Hz collocation points held through a 0.6 s stance costs
+# 900 · 10 · 0.01 · 0.6 = 54; a touch-down skid of 0.7 m/s over its last 5 mm (≈ 10 ms, φ ≈ 0.5)
+# ≈ 22; a swing toe crossing the 10 mm band at 6 m/s for 3 ms (φ ≈ 0.3) ≈ 290 — against a
+# walking gait cycle's objective of ≈ 440 and a running one's of ≈ 23.  Chosen with
+# STANCE_FRAME_WEIGHT (see there: ten times more swamped the run's energy); the same number for
+# every gait, body and scene length (module docstring).
+NO_SLIP_WEIGHT = 10.0
 
 
 def phi(h, h0: float = H_NO_SLIP):

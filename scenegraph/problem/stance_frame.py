@@ -41,14 +41,17 @@ from scenegraph.model.motion import basis
 __all__ = ["STANCE_FRAME_WEIGHT", "foot_lateral_fn", "planted_frames", "stance_frame_residuals",
            "stance_frame_deviation"]
 
-# w_frame, 1/(rad²·s).  A planted foot turned by θ for τ seconds costs OBJ_SCALE² w θ² τ:
-# 1° (0.0175 rad) held through a 0.6 s stance costs 900 · 1e3 · 3.0e-4 · 0.6 ≈ 165, about a
-# third of a walking gait cycle's whole objective (≈ 440 for 1.2 s, docs/results.md), so the
-# solver trades no more than a fraction of a degree of stance rotation for energy; 0.5° turns
-# a foot's toe (0.1 m from the ankle) by under 1 mm, the stage audit's stance-slide goal is
-# 5 mm.  Not tuned to a scene: the same number for every gait, body and scene length (the
-# term and the energy are both integrals over time, see the module docstring).
-STANCE_FRAME_WEIGHT = 1e3
+# w_frame, 1/(rad²·s).  A planted foot turned by θ for τ seconds costs OBJ_SCALE² w θ² τ: 1°
+# (0.0175 rad) held through a 0.6 s stance costs 900 · 100 · 3.0e-4 · 0.6 ≈ 16.5.  The styles'
+# energies differ by two orders of magnitude (objective per second of motion: the learned run
+# ≈ 20, the learned walk ≈ 370, the default style ≈ 3000), so one number must hold a walker's
+# feet without swamping a runner's energy.  Measured (docs/results.md, "Contact semantics"):
+# at 1e3 (with NO_SLIP_WEIGHT 100) the walk passed the stage audit but springy_run's objective went
+# 23 → 259, capped at 300 iterations, its 120 Hz root residual 0.018 → 0.24 bw (the run's audit
+# failed); at 100 (and 10) the walk still passes (slide 1.37 mm, 60 iterations) and the run keeps
+# its dynamics (0.019 bw, objective 42).  The same number for every gait, body and scene length
+# (the term and the energy are both integrals over time, see the module docstring).
+STANCE_FRAME_WEIGHT = 100.0
 
 
 @functools.lru_cache(maxsize=16)

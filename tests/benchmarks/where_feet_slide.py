@@ -9,7 +9,8 @@ horizontal travel of one contact vertex during its contact run), and the causes,
 equivalent travel in mm so they can be compared:
 
 * **swivel**: the foot mesh's yaw (about the vertical) ranges over Δψ in the frames of the
-  stance where the foot mesh itself (not only the toes) touches; its
+  stance where the foot mesh itself rests on a patch of its sole (vertices in the band spanning
+  at least 1 cm; not a rim point as the foot lands or leaves); its
   sole, L long, moves up to L·Δψ at the far end;
 * **roll**: the foot's lateral axis tilts over a range Δφ about the long axis (same frames); the sole's
   edge (W/2 from its middle) moves W/2·Δφ;
@@ -41,7 +42,8 @@ from scenegraph.stage_audit.checks import heights_above_ground  # noqa: E402
 from scenegraph.stage_audit.reader import read_stage  # noqa: E402
 
 SKID_BAND = 0.010  # m: the no-slip band of the solver (H_NO_SLIP), measured on the mesh
-SKID_FRAMES = 6  # frames before a stance's first and after its last frame searched for a skid
+SKID_FRAMES = 6
+PATCH = 0.01  # m: the foot rests on its sole when its vertices in the band span this much  # frames before a stance's first and after its last frame searched for a skid
 
 
 def _rotations(P: np.ndarray) -> np.ndarray:
@@ -90,11 +92,8 @@ def diagnose(stage, fps: float = 120.0, tol: float = 0.005, min_stance: float = 
             ha = heights_above_ground(Pa, smp.ground)
             ht = heights_above_ground(M.points[:, vt], smp.ground) if len(vt) else np.zeros((len(smp.times), 0))
             R = _rotations(Pf)
-            f0, l0, L, W = _foot_axes(Pf[0])
-            fwd = np.einsum("tij,j->ti", R, f0)
-            lat = np.einsum("tij,j->ti", R, l0)
-            yaw = np.unwrap(np.arctan2(fwd[:, 1], fwd[:, 0]))
-            roll = np.arcsin(np.clip(lat[:, 2], -1, 1))
+            f0, _, L, W = _foot_axes(Pf[int(np.argmax((hf < tol).sum(axis=1)))])  # length, width: flattest frame
+            f0, _, _, _ = _foot_axes(Pf[0])
             along = (Pf[0, :, :2] - Pf[0, :, :2].mean(axis=0)) @ f0[:2]
             rear, front = along < np.quantile(along, 0.25), along > np.quantile(along, 0.75)
             down = (ha < tol).any(axis=1)
@@ -114,8 +113,19 @@ def diagnose(stage, fps: float = 120.0, tol: float = 0.005, min_stance: float = 
                        "slide_mm": round(1e3 * slide, 2),
                        "slide_frames": [int(worst[0]), int(worst[1])] if worst else None}
                 seg = slice(a, b + 1)
-                on = a + np.flatnonzero((hf[seg] < tol).any(axis=1))  # the foot (not only its toes) down
-                dyaw, droll = (float(np.ptp(v[on])) if len(on) else 0.0 for v in (yaw, roll))
+                # frames the foot rests on a patch of its sole (band vertices spanning >= PATCH), not
+                # touching with a rim point as it lands or leaves (a rotation about that point slides nothing)
+                on = [t for t in range(a, b + 1) if (hf[t] < tol).sum() >= 2
+                      and np.ptp(Pf[t, hf[t] < tol, :2], axis=0).max() >= PATCH]
+                dyaw = droll = 0.0
+                if on:  # axes of the foot at its flattest frame (most vertices down), carried by the fitted rotations
+                    ref = max(on, key=lambda t: int((hf[t] < tol).sum()))
+                    f_r, l_r, _, _ = _foot_axes(Pf[ref])
+                    rel = np.einsum("tij,kj->tik", R[on], R[ref])  # R_t R_ref^T
+                    fwd = np.einsum("tij,j->ti", rel, f_r)
+                    lat = np.einsum("tij,j->ti", rel, l_r)
+                    dyaw = float(np.ptp(np.unwrap(np.arctan2(fwd[:, 1], fwd[:, 0]))))
+                    droll = float(np.ptp(np.arcsin(np.clip(lat[:, 2], -1, 1))))
                 flat = (hf[seg][:, rear] < tol).any(axis=1) & (hf[seg][:, front] < tol).any(axis=1)
                 glide = 0.0
                 for fa, fb in _runs(flat):

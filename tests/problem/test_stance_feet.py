@@ -196,3 +196,37 @@ def test_walk_stage_feet_do_not_slide(tmp_path, monkeypatch):
     recs = mod.diagnose(tmp_path / "w.usda")
     assert len(recs) >= 3
     assert max(r["swivel_deg"] for r in recs) < 1.0 and max(r["roll_deg"] for r in recs) < 1.0, recs
+
+
+def _diagnosis_module():
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "where_feet_slide.py"
+    spec = importlib.util.spec_from_file_location("where_feet_slide", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("kind", ["swivel", "glide"])
+def test_stage_diagnosis_names_a_known_swivel_and_glide(kind, tmp_path):
+    """where_feet_slide.py on synthetic stages: a standing body turned 4° about the vertical
+    (both feet swivel 4°) or pushed 6 mm along x (both feet glide 6 mm) over 0.5 s."""
+    pytest.importorskip("pxr")
+    from scenegraph.export.usd import CharacterTrack, export_usd
+    q0 = np.asarray(standing_pose(CH), float)
+    u = np.linspace(0, 1, 61)[:, None]
+    q = np.tile(q0, (61, 1))
+    if kind == "swivel":
+        q[:, YAW] += np.radians(4.0) * u[:, 0]
+    else:
+        q[:, 0] += 0.006 * u[:, 0]
+    path = export_usd(tmp_path / "s.usda", [CharacterTrack("c", CH, q)], 120.0)
+    recs = _diagnosis_module().diagnose(path)
+    assert sorted(r["foot"] for r in recs) == ["l", "r"]
+    for r in recs:
+        if kind == "swivel":
+            assert r["swivel_deg"] == pytest.approx(4.0, abs=0.05) and r["roll_deg"] < 0.05
+        else:
+            assert r["glide_mm"] == pytest.approx(6.0, abs=0.05) and r["swivel_deg"] < 0.05
+            assert r["slide_mm"] == pytest.approx(6.0, abs=0.05) and r["cause"] == "glide"
