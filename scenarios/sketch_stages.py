@@ -20,9 +20,10 @@ in time order) when either
   the key is in the air; the flight then runs from the key before it to the key after it.
 
 Consecutive detected intervals sharing a key merge into one flight.  Each flight becomes a
-``jump`` goal (named ``<sketch>_flight_<i>``) with its take-off at the first key's time and
-pelvis position (x, y), its landing at the last key's, and the heading change between them
-as its turn when both keys give a heading.  Its fields are located at the keys that implied
+``jump`` goal (named ``<sketch>_flight_<i>``) taking off at the first key's time from where
+the character stands (its start or the previous landing: a take-off pelvis leans ahead of the
+feet, so its key does not say where they are), landing at the last key's time under that
+key's pelvis (x, y), with the heading change between the keys as its turn when both give one.  Its fields are located at the keys that implied
 them, so an impossible detected leap (e.g. under 0.3 s on the ground before it) is an error
 at the sketch's keys.  Not detected: a character whose goals already state its contacts
 (a ``jump``, ``hop`` or ``footprints`` goal), and a sketch with ``stages: none``.
@@ -57,7 +58,8 @@ def detect_flights(keys: list[tuple[float, tuple[float, float, float], float | N
                    stature: float) -> list[dict]:
     """Flights of one sketch: ``keys`` = [(time s, pelvis (x, y, z) m, heading deg or None,
     index in the file)] with positions, any order.  Returns [{"keys": (i0, i1) file indices,
-    "t": (t0, t1), "why": [...], "takeoff": (x, y), "landing": (x, y), "turn_deg": float}]."""
+    "t": (t0, t1), "why": [...], "takeoff": pelvis (x, y) at the first key, "landing": (x, y),
+    "turn_deg": float}]."""
     ks = sorted(keys, key=lambda k: k[0])
     v_max = reach_speed(stature)
     marks: list[tuple[int, int, str]] = []  # (a, b) positions in ks, reason
@@ -138,11 +140,11 @@ def add_sketch_stages(data: Any, positions: dict) -> tuple[Any, dict, list[dict]
             i0, i1 = f["keys"]
             added.append(((j, i0, i1), {
                 "type": "jump", "name": name, "character": who,
-                "takeoff": {"position": [f["takeoff"][0], f["takeoff"][1]], "time": f["t"][0]},
+                "takeoff": {"time": f["t"][0]},
                 "landing": {"position": [f["landing"][0], f["landing"][1]], "time": f["t"][1]},
                 "turn_deg": f["turn_deg"]}))
             stages.append({"goal": name, "sketch": sketch, "character": who, "keys": [i0, i1],
-                           "t": list(f["t"]), "why": f["why"], "takeoff": list(f["takeoff"]),
+                           "t": list(f["t"]), "why": f["why"], "pelvis_at_takeoff": list(f["takeoff"]),
                            "landing": list(f["landing"]), "turn_deg": f["turn_deg"]})
     if not added:
         return data, positions, []
@@ -158,8 +160,7 @@ def add_sketch_stages(data: Any, positions: dict) -> tuple[Any, dict, list[dict]
         if at0 is None:
             continue
         base = ("goals", n)
-        for path, at in ((base, at0), (base + ("takeoff",), at0), (base + ("takeoff", "position"), at0),
-                         (base + ("takeoff", "time"), at0), (base + ("landing",), at1),
+        for path, at in ((base, at0), (base + ("takeoff",), at0), (base + ("takeoff", "time"), at0), (base + ("landing",), at1),
                          (base + ("landing", "position"), at1), (base + ("landing", "time"), at1),
                          (base + ("turn_deg",), at1)):
             positions[path] = at

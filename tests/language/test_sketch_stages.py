@@ -49,6 +49,7 @@ def test_a_long_leap_is_detected_out_of_reach():
     g = scn.goals[-1]
     assert g.type == "jump" and g.name == "sketch_flight_0" and g.character == "jumper"
     assert (g.takeoff.time, g.landing.time, tuple(g.landing.position)) == (0.6, 1.05, (1.6, 0.0))
+    assert g.takeoff.position is None  # from where the character stands, not under the leaning pelvis
     assert g.turn_deg == 0.0  # the take-off key gives no heading: no turn is implied
     # the same leap, slower (1.6 m in 0.9 s = 1.8 m/s): walkable, nothing detected
     slow = [LEAP[0], LEAP[1].replace("1.05", "1.5"), LEAP[2].replace("1.6, position", "1.9, position")]
