@@ -17,6 +17,7 @@ from scenarios.bundled import bundled_styles, find_scenario
 from scenarios.errors import InputError, Location
 from scenarios.repeat import REPEAT_JSON_SCHEMA, expand_repeats
 from scenarios.schema import FieldProblem, Scenario
+from scenarios.sketch_stages import add_sketch_stages
 from scenarios.yamlio import Positions, error_location, parse_yaml, read_text
 
 __all__ = ["load_scenario", "parse_scenario", "validate_scenario", "validation_context", "scenario_json_schema"]
@@ -88,12 +89,15 @@ def validate_scenario(data: Any, positions: Positions, file: str | None = None,
                       base_dir: str | os.PathLike | None = None) -> Scenario:
     """Validate parsed YAML data; the first problem becomes an InputError with file:line:col.
 
-    ``repeat`` blocks are expanded first (:mod:`scenarios.repeat`)."""
+    ``repeat`` blocks are expanded first (:mod:`scenarios.repeat`), then the flights of keyframe
+    sketches without stated stages become ``jump`` goals (:mod:`scenarios.sketch_stages`)."""
     data, positions = expand_repeats(data, positions, file)
+    data, positions, stages = add_sketch_stages(data, positions)  # flights a keyframe sketch implies
     ctx = validation_context(file, base_dir)
     try:
         scn = Scenario.model_validate(data, context=ctx)
         scn._positions = dict(positions)
+        scn._sketch_stages = stages
         return scn
     except ValidationError as exc:
         errors = exc.errors(include_url=False)

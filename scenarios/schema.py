@@ -624,6 +624,9 @@ class KeyframesGoal(_Model):
     keys: list[Keyframe] = Field(min_length=1, max_length=200, description="the keys, in any order")
     tolerance: Num = Field(0.1, gt=0.0, le=10.0, description="report bound: largest pelvis distance from a "
                                                             "key's position (m)")
+    stages: Literal["detect", "none"] = Field(
+        "detect", description="detect: flights the keys imply (out of the legs' reach, or the pelvis in free fall) "
+                              "become jump goals (scenarios/sketch_stages.py); none: no flight is added")
 
     plan_weight: ClassVar[float | str | None] = TARGET_WEIGHT
 
@@ -750,6 +753,7 @@ class Scenario(_Model):
     _base_dir: Path | None = PrivateAttr(None)
     _source: str | None = PrivateAttr(None)
     _positions: dict = PrivateAttr(default_factory=dict)
+    _sketch_stages: list = PrivateAttr(default_factory=list)
 
     # -- accessors -----------------------------------------------------------------------
     @property
@@ -772,6 +776,11 @@ class Scenario(_Model):
             if c.name == name:
                 return c
         raise KeyError(name)
+
+    @property
+    def sketch_stages(self) -> list[dict]:
+        """Flights detected in keyframe sketches (scenarios/sketch_stages.py), each added as a jump goal."""
+        return list(self._sketch_stages)
 
     @property
     def is_edit(self) -> bool:

@@ -6,12 +6,13 @@ states exactly that at the collocation points of each flight (its take-off and t
 points included, where the contact force is held at zero too): for every point k after the
 flight's first point k0
 
-    [P(k) − P(k0)] / M + g (t_k − t_k0) e_z = 0,     [H(k) − H(k0)] / M = 0      (6 equalities per point)
+    P(k) − P(k0) + M g (t_k − t_k0) e_z = 0,     H(k) − H(k0) = 0      (6 equalities per point)
 
-— per kilogram of the character (m/s and m²/s), so that the rows are O(1) like the NLP's other
-equality rows (footprints in m, the root residual in body weights) whatever the character's
-mass (in kg·m/s a 70 kg jumper leaving at 3 m/s carries ~200, its spin ~10 kg·m²/s, and
-IPOPT's absolute constraint tolerance then means something else for each row and body);
+in kg·m/s and kg·m²/s.  Stated per kilogram instead (divided by M, so O(1) whatever the body's
+mass) they were measured worse on hopscotch and kept out (docs/dynamic-motion.md, round 11):
+twist_jump unchanged (300-iteration cap, E 593 vs 595, flight drift 0.33 vs 0.75 %), hopscotch
+stalled early (172 vs 600 iterations) at a higher energy (4172 vs 3873) with its stage's feet
+worse (penetration 12.5 vs 5.0 mm, stance slide 32 vs 10 mm).
 
 with P, H functions of the pose q and velocity q̇ only (:func:`momenta_fn`, plain CasADi SX
 algebra of the forward kinematics: the NLP gets their exact second derivatives).  This
@@ -74,8 +75,8 @@ def flight_groups(flights, motion, s: np.ndarray) -> list[np.ndarray]:
 
 
 def flight_constraints(ch: Character, groups: list[np.ndarray], Q, Qd, T) -> ca.MX | None:
-    """The equalities of the module docstring (6 per flight point after each flight's first,
-    per kilogram: m/s and m²/s), stacked; ``Q``, ``Qd`` (35, N) poses and world-time velocities at the collocation points,
+    """The equalities of the module docstring (6 per flight point after each flight's first),
+    stacked; ``Q``, ``Qd`` (35, N) poses and world-time velocities at the collocation points,
     ``T`` (1, N) their world times (MX: the timewarp may be free).  None without flights."""
     if not groups:
         return None
@@ -85,7 +86,7 @@ def flight_constraints(ch: Character, groups: list[np.ndarray], Q, Qd, T) -> ca.
         idx = [int(i) for i in k]
         _, P, H = fn.map(len(idx))(Q[:, idx], Qd[:, idx])
         dt = T[:, idx[1:]] - T[:, idx[0]]
-        grav = ca.vertcat(ca.DM.zeros(2, len(idx) - 1), G * dt)
-        rows.append(ca.vec((P[:, 1:] - ca.repmat(P[:, 0], 1, len(idx) - 1)) / M + grav))
-        rows.append(ca.vec((H[:, 1:] - ca.repmat(H[:, 0], 1, len(idx) - 1)) / M))
+        grav = ca.vertcat(ca.DM.zeros(2, len(idx) - 1), M * G * dt)
+        rows.append(ca.vec(P[:, 1:] - ca.repmat(P[:, 0], 1, len(idx) - 1) + grav))
+        rows.append(ca.vec(H[:, 1:] - ca.repmat(H[:, 0], 1, len(idx) - 1)))
     return ca.vertcat(*rows)

@@ -172,6 +172,9 @@ def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, re
         fp = run_fingerprint(source.read_text(encoding="utf-8"), schedule)
         print(f"compose: running {scn.name!r}: {len(schedule)} steps, {len(schedule.generations())} generation(s), "
               f"jobs {jobs}, run folder {rdir}", file=log, flush=True)
+        for st in scn.sketch_stages:
+            print(f"compose: {st['sketch']}: flight detected {st['t'][0]:g}-{st['t'][1]:g} s (keys {st['keys']}): "
+                  f"{'; '.join(st['why'])} -> jump goal {st['goal']!r}", file=log, flush=True)
         result = _solve(scene, schedule, rdir, fp, jobs, resume, fail_capped, sched, store, log)
         final = result.scene
 
@@ -220,6 +223,7 @@ def _run_locked(scn, schedule, source, out_path, rdir, report_path, t0, jobs, re
                                     "extra_masses": extra_mass_entries(scn, c.name)}
                            for c in final.characters},
             "goals": goals, "couplings": couplings,
+            "sketch_stages": scn.sketch_stages,  # flights detected in keyframe sketches (their jump goals above)
             **goal_verdict(goals, couplings),
             "all_audits_pass": all(a["passes"] for a in audits.values()),
             "stage_audit": stage_audit,  # compose audit of the written stage at 120 Hz (not in "passes")

@@ -100,3 +100,40 @@ def test_run_and_leap(tmp_path):
     (f,) = [f for f in flight_physics(stage, "runner") if f.duration > 0.3]  # the leap, not a running stride
     assert f.parabola_rms_mm <= 2.0 and (f.ang_mom_drift <= 0.02 or f.ang_mom_drift_abs <= 0.5), f
     assert report["characters"]["runner"]["audit"]["passes"]
+
+
+SKETCH = """name: sketched_leap
+description: a leap nobody stated - only sketched (not bundled)
+duration: 2.0
+characters:
+  - name: jumper
+    start: {position: [0.0, 0.0], heading: 0}
+goals:
+  - type: keyframes
+    name: sketch
+    character: jumper
+    keys:
+      - {time: 0.3, position: [0.0, 0.0, 0.93]}
+      - {time: 0.8, position: [0.3, 0.0, 1.0]}
+      - {time: 1.04, position: [0.75, 0.0, 1.25]}
+      - {time: 1.28, position: [1.2, 0.0, 0.95]}
+      - {time: 1.8, position: [1.3, 0.0, 0.93]}
+"""
+
+
+def test_a_sketched_leap_gets_its_flight_detected_and_synthesised(tmp_path):
+    """Five pelvis keys of a forward jump, the middle one an apex the pelvis falls from at ~g
+    (free fall, scenarios/sketch_stages.py): the run report lists the detected stage, its jump
+    goal holds, and the flight the stage shows is ballistic (the same machinery as a stated jump)."""
+    (tmp_path / "s.yaml").write_text(SKETCH)
+    out, rep = tmp_path / "s.usda", tmp_path / "s.json"
+    rc = main(["run", str(tmp_path / "s.yaml"), "-o", str(out), "--report", str(rep), "--run-dir",
+               str(tmp_path / "run"), "--fps", "120", "--no-store"])
+    report = json.loads(rep.read_text())
+    (st,) = report["sketch_stages"]
+    assert st["goal"] == "sketch_flight_0" and st["t"] == [0.8, 1.28] and st["why"][0].startswith("free fall")
+    assert report["goals"]["sketch_flight_0"]["holds"], report["goals"]
+    (f,) = [f for f in flight_physics(read_stage(out), "jumper") if f.duration > 0.2]
+    assert f.parabola_rms_mm <= 2.0 and (f.ang_mom_drift <= 0.02 or f.ang_mom_drift_abs <= 0.5), f
+    assert report["characters"]["jumper"]["audit"]["passes"]
+    assert rc == (0 if report["passes"] else 1)
