@@ -15,6 +15,9 @@ __all__ = ["register", "parse_frames", "parse_clip_spec", "clip_specs", "clip_ta
            "learn_from_clips"]
 
 
+PROJECTION_ITER = 200  # IPOPT iterations of the projection of X_T onto its footsteps (clip_target)
+
+
 def parse_frames(text: str) -> tuple[int, int]:
     """"A:B" → (A, B): source frames of the BVH file, B exclusive (Python slice style)."""
     try:
@@ -200,11 +203,16 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     if feasible:
         from scenegraph.nio import feasible_target, joint_rms_deg, resample
 
-        res = feasible_target(clip.character, resample(motion), steps)
+        res = feasible_target(clip.character, resample(motion), steps, max_iter=PROJECTION_ITER)
         # a projection stopped early can be far from the clip (08_02 at 400 iterations: 15.7°
-        # away, converged at 544: 0.56°), so it must converge and stay near the clip
+        # away, converged at 544: 0.56°), so it must stay near the clip; and it must hold C.
+        # It need not reach IPOPT's tolerance: with the dense dynamics the projection of 07_01
+        # 64:201 stalls there (objective 40.3892 at 150 iterations, 40.3884 at 400 and still
+        # not converged at 1500 — 1145 s; C to 1e-8 m, 2.15° from the reconstruction, measured)
         dev = joint_rms_deg(res.motion, motion)
-        if not res.success or max(res.violations.values(), default=0.0) > 1e-3 or dev > 3.0:
+        viol = max(res.violations.values(), default=0.0)
+        held = viol <= 1e-3 if res.success else (res.status.startswith("Maximum_Iterations") and viol <= 1e-5)
+        if not held or dev > 3.0:
             raise InputError(f"{path} frames {frames[0]}:{frames[1]}: the reconstruction cannot be moved onto "
                              f"its footsteps ({res.summary()}; {dev:.1f}° RMS from the reconstruction)")
         motion = res.motion

@@ -101,3 +101,23 @@ def test_cli_learn_several_clips_bad_input(tmp_path, capsys):
     assert "PATH:A:B" in capsys.readouterr().err
     assert main(["learn", f"{clip}:64:201", f"{clip}:130:262", "--counterexamples", "ipopt", "-o", str(out)]) == 2
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_compose_learn_two_segments_end_to_end(tmp_path):
+    """`compose learn A.bvh:64:201 A.bvh:130:262` (two strides of 07_01, 2 NIO iterations): a
+    style whose provenance lists both segments, the first as its clip, and whose header repeats
+    the command."""
+    from pathlib import Path
+
+    from schedules.cli.main import main
+    from scenegraph.model.style import load_style
+    clip = Path(__file__).resolve().parents[2] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
+    out = tmp_path / "w.yaml"
+    assert main(["learn", f"{clip}:64:201", f"{clip}:130:262", "--max-iter", "2", "-o", str(out)]) == 0
+    st = load_style(out)
+    prov = st.provenance.model_dump()
+    assert prov["clip"] == clip.name and prov["frames"] == "64:201"
+    assert [c["frames"] for c in prov["clips"]] == ["64:201", "130:262"]
+    assert f"{clip.name}:64:201 {clip.name}:130:262" in out.read_text().splitlines()[0]
+    assert prov["g_final"] <= prov["g_initial"]
