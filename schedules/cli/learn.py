@@ -296,7 +296,7 @@ def learn_from_clips(specs, body: str = "adult_male", out=None, name=None, progr
 
         res = _replace(res, style=res.style.model_copy(update={"provenance": Provenance(**prov)}))
     if out is not None:
-        save_learned(res, out, [(n, fr) for n, (_, fr) in zip(names, specs)], body)
+        save_learned(res, out, [(n, fr) for n, (_, fr) in zip(names, specs)], None, body)
     return res, first
 
 
