@@ -121,3 +121,18 @@ def test_compose_learn_two_segments_end_to_end(tmp_path):
     assert [c["frames"] for c in prov["clips"]] == ["64:201", "130:262"]
     assert f"{clip.name}:64:201 {clip.name}:130:262" in out.read_text().splitlines()[0]
     assert prov["g_final"] <= prov["g_initial"]
+
+
+def test_learned_header_names_every_clip(tmp_path):
+    """``save_learned`` of a several-clip style: the header repeats ``compose learn PATH:A:B …``."""
+    from types import SimpleNamespace
+
+    from schedules.cli.learn import save_learned
+    from scenegraph.model.style import Provenance, load_style
+    st = default_style().model_copy(update={"provenance": Provenance(clip="a.bvh", frames="1:60")})
+    out = tmp_path / "s.yaml"
+    save_learned(SimpleNamespace(style=st), out, [("a.bvh", (1, 60)), ("b.bvh", (5, 90))], None, "adult_male")
+    assert out.read_text().splitlines()[0] == "# learned by: compose learn a.bvh:1:60 b.bvh:5:90 --body adult_male -o s.yaml"
+    assert load_style(out).provenance.clip == "a.bvh"
+    save_learned(SimpleNamespace(style=st), out, "a.bvh", (1, 60), "adult_male")
+    assert out.read_text().splitlines()[0].startswith("# learned by: compose learn a.bvh --frames 1:60 --body")
