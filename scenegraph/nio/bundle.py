@@ -1,9 +1,11 @@
-"""The default NIO optimiser: a trust-region cutting-plane (bundle) method on G + D.
+"""The default NIO optimiser: a trust-region cutting-plane (bundle) method on Σ_c G_c + D
+(one clip or several of one person, :mod:`.multi`).
 
 Every counterexample X_i ever found is a motion satisfying C, so for every θ
 G(θ) ≥ E(X_T; θ) − E(X_i; θ) =: L_i(θ) (and ≥ 0).  At the current θ_c each L_i is
 linearised with its Eq. 21 gradient (AD, forces re-fitted by NNLS under θ_c); the step
-minimises the model max(0, max_i L_i + g_i·δ) in the box |δ_j| ≤ r s_j (s: the typical
+minimises the model Σ_c max(0, max_{i ∈ c} L_i + g_i·δ) (c: the clip a counterexample
+belongs to) in the box |δ_j| ≤ r s_j (s: the typical
 magnitudes of :func:`.theta.theta_scales`), with Σα = 1 held exactly (so D = 0) — an LP.
 """
 from __future__ import annotations
@@ -13,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from scenegraph.model.motion import Motion
+from scenegraph.nio.multi import MultiNIO
 from scenegraph.nio.prior import ALPHA_MIN, log_alpha_prior, tie_average
 from scenegraph.nio.records import History, IterationRecord, NIOResult, Problem
 from scenegraph.nio.theta import ALPHA, project, style_from_theta, theta_bounds, theta_scales
@@ -28,13 +31,16 @@ def cut(nio: Problem, theta: np.ndarray, motion: Motion, ET: float, gT: np.ndarr
 
 
 def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray, alpha_floor: float = 0.0,
-               ties=(), lin: tuple[float, np.ndarray] | None = None):
-    """argmin over δ of max(0, max_i L_i + g_i·δ) [+ P0 + gP·δ] + μ Σ|δ/s| subject to Σα = 1,
-    the Style bounds (α ≥ ``alpha_floor``), δ_i = δ_j for every pair of ``ties`` and the trust
-    box |δ_j| ≤ radius·s_j (an LP).  ``lin`` (P0, gP): a prior's value and gradient at θ
-    (:mod:`.prior`), added linearised.  Returns (θ + δ, model value)."""
+               ties=(), lin: tuple[float, np.ndarray] | None = None, groups=None):
+    """argmin over δ of Σ_c max(0, max_{i ∈ c} L_i + g_i·δ) [+ P0 + gP·δ] + μ Σ|δ/s| subject to
+    Σα = 1, the Style bounds (α ≥ ``alpha_floor``), δ_i = δ_j for every pair of ``ties`` and the
+    trust box |δ_j| ≤ radius·s_j (an LP with one epigraph variable per group).  ``groups``: the
+    clip index c of every cut (default: one clip, :mod:`.multi`); ``lin`` (P0, gP): a prior's
+    value and gradient at θ (:mod:`.prior`), added linearised.  Returns (θ + δ, model value)."""
     from scipy.optimize import linprog
 
+    groups = [0] * len(cuts) if groups is None else [int(c) for c in groups]
+    ng = max(groups) + 1 if groups else 1
     n = len(theta)
     M = ALPHA.stop - ALPHA.start
     lo, hi = theta_bounds(alpha_floor)
@@ -43,59 +49,78 @@ def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray,
     dlo = np.minimum(dlo, 0.0)
     dhi = np.maximum(dhi, 0.0)
     Lmax = max(c[0] for c in cuts)
+    model0 = sum(max([0.0] + [c[0] for c, gi in zip(cuts, groups) if gi == k]) for k in range(ng))
     mu = 1e-3 * max(Lmax, 1e-12) / max(radius, 1e-12) / n
-    # variables: δ (n), u (n) ≥ |δ/s|, t ≥ 0
+    # variables: δ (n), u (n) ≥ |δ/s|, t (one per group) ≥ 0
     gP = np.zeros(n) if lin is None else np.asarray(lin[1], float)
-    cvec = np.r_[gP, np.full(n, mu), 1.0]
+    cvec = np.r_[gP, np.full(n, mu), np.ones(ng)]
     rows, rhs = [], []
-    for L, g in cuts:
-        rows.append(np.r_[g, np.zeros(n), -1.0])
+    for (L, g), k in zip(cuts, groups):
+        rows.append(np.r_[g, np.zeros(n), -np.eye(ng)[k]])
         rhs.append(-L)
-    A1 = np.hstack([np.diag(1 / scales), -np.eye(n), np.zeros((n, 1))])
-    A2 = np.hstack([-np.diag(1 / scales), -np.eye(n), np.zeros((n, 1))])
+    A1 = np.hstack([np.diag(1 / scales), -np.eye(n), np.zeros((n, ng))])
+    A2 = np.hstack([-np.diag(1 / scales), -np.eye(n), np.zeros((n, ng))])
     A_ub = np.vstack([np.array(rows), A1, A2])
     b_ub = np.r_[rhs, np.zeros(2 * n)]
-    A_eq = [np.r_[np.ones(M), np.zeros(2 * n - M), 0.0]]
+    A_eq = [np.r_[np.ones(M), np.zeros(2 * n - M), np.zeros(ng)]]
     b_eq = [1.0 - theta[ALPHA].sum()]
     for i, j in ties:
-        row = np.zeros(2 * n + 1)
+        row = np.zeros(2 * n + ng)
         row[i], row[j] = 1.0, -1.0
         A_eq.append(row)
         b_eq.append(0.0)
     A_eq = np.array(A_eq)
-    bounds = list(zip(dlo, dhi)) + [(0, None)] * n + [(0, None)]
+    bounds = list(zip(dlo, dhi)) + [(0, None)] * n + [(0, None)] * ng
     r = linprog(cvec, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
     if r.status != 0:
-        return theta.copy(), Lmax
+        return theta.copy(), model0
     d = r.x[:n]
-    return theta + d, float(r.x[-1]) + (0.0 if lin is None else float(lin[0] + gP @ d))
+    return theta + d, float(r.x[2 * n:].sum()) + (0.0 if lin is None else float(lin[0] + gP @ d))
+
+
+def _per_clip(seeds, n: int) -> list[list[Motion]]:
+    """Seed motions per clip: one clip's seeds may be given as a plain tuple of motions."""
+    seeds = list(seeds)
+    if seeds and isinstance(seeds[0], Motion):
+        seeds = [seeds]
+    if len(seeds) > n:
+        raise ValueError(f"seeds for {len(seeds)} clips, the problem has {n}")
+    return [list(s) for s in seeds] + [[] for _ in range(n - len(seeds))]
 
 
 def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 3,
                g_abs: float = 1e-3, trust: float = 0.03, min_trust: float = 1e-3, max_trust: float = 4.0,
                max_cuts: int = 40, max_tries: int = 4, callback: Callable[[IterationRecord], None] | None = None,
-               seeds: tuple[Motion, ...] = (), prior_weight: float = 0.0, ties=()) -> NIOResult:
-    """Minimise G + D (+ P) from θ0 by the bundle method.
+               seeds=(), prior_weight: float = 0.0, ties=()) -> NIOResult:
+    """Minimise Σ_c G_c + D (+ P) from θ0 by the bundle method.
+
+    ``nio``: a :class:`.multi.MultiNIO` (several clips) or one NIO problem (run as the
+    one-clip MultiNIO).  Every clip keeps its own counterexamples (at most ``max_cuts``
+    each) and its cuts bound its own G_c (:func:`model_step`'s groups).
 
     ``prior_weight`` w > 0 adds the log-normal prior on α of :func:`.prior.log_alpha_prior`
     (scaled by G + D at θ0, linearised in each LP, the true value in every comparison; α ≥
     :data:`.prior.ALPHA_MIN` keeps its log finite); ``ties`` (θ index pairs, :func:`.prior.tie_pairs`)
     are held equal (θ0 averaged over each tied set first).
 
-    The trial θ gets its own counterexample (``nio.evaluate``: a spacetime solve
-    warm-started from the best known motion, or the local step), which is added to the
-    bundle.  G(θ_c) itself is re-read with every new counterexample (a later solve can show
-    that the current G was underestimated), and the trial is accepted when G + D is below
-    that; r doubles when the decrease was ≥ half the model's prediction, else r halves (the
-    halving of footnote 3) and the enriched model is re-solved (at most ``max_tries`` trials
-    per iteration).  The returned g_initial and g_final are G at θ0 and at the result re-read
-    with all counterexamples found.  ``seeds``: motions known to satisfy C (e.g. syntheses
-    from a neutral initial motion under θ0) that start the bundle as counterexamples.
+    The trial θ gets its own counterexample per clip (``NIO.evaluate``: a spacetime solve
+    warm-started from the best known motion, or the local step), which is added to that
+    clip's bundle.  G(θ_c) itself is re-read with every new counterexample (a later solve can
+    show that the current G was underestimated), and the trial is accepted when G + D is
+    below that; r doubles when the decrease was ≥ half the model's prediction, else r halves
+    (the halving of footnote 3) and the enriched model is re-solved (at most ``max_tries``
+    trials per iteration).  The returned g_initial and g_final are G at θ0 and at the result
+    re-read with all counterexamples found.  ``seeds``: motions known to satisfy C (e.g.
+    syntheses from a neutral initial motion under θ0) that start the bundle as
+    counterexamples — a tuple of motions (one clip) or one tuple per clip.
 
     Stop: G + D below ``g_abs`` × its initial value; a relative decrease below ``rtol`` or
     no accepted step in ``patience`` iterations; or ``max_iter`` iterations (a safety net,
     reported as such).
     """
+    prob = nio if hasattr(nio, "clips") else MultiNIO((nio,))
+    clips = prob.clips
+    nc = len(clips)
     log = History(callback)
     th = project(np.asarray(theta0, float))
     a = np.maximum(th[ALPHA], 0)
@@ -103,12 +128,13 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
     ties = list(ties)
     if ties:
         th = tie_average(th, ties)
-    floor = max(nio.alpha_floor, ALPHA_MIN) if prior_weight > 0 else nio.alpha_floor
+    floor = max(prob.alpha_floor, ALPHA_MIN) if prior_weight > 0 else prob.alpha_floor
     if prior_weight > 0:
         th[ALPHA] = np.maximum(th[ALPHA], floor)
         th[ALPHA] /= th[ALPHA].sum()
     scales = theta_scales(style_from_theta(th))
-    cur = nio.evaluate(th, tuple(seeds))
+    bundle = _per_clip(seeds, nc)
+    cur = first = prob.evaluate(th, bundle)
     p_scale = max(cur.G + cur.D, 1e-12)
 
     def P(theta):
@@ -116,7 +142,19 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
 
     def extra(e):  # D + P of an evaluation
         return e.D + P(e.theta)[0]
-    bundle: list[Motion] = list(seeds) + ([cur.motion_S] if cur.G > 0 else [])
+
+    def add(ev):  # each clip's new counterexample joins its own bundle
+        for c, part in enumerate(ev.parts):
+            if part.G > 0:
+                bundle[c] = (bundle[c] + [part.motion_S])[-max_cuts:]
+
+    def bound(theta, known=None):  # Σ_c max(known_c, 0, every cut of clip c) at theta
+        out = []
+        for c, clip in enumerate(clips):
+            ET, gT, _, _ = clip.measure(theta, clip.target)
+            out.append(max([0.0 if known is None else known[c]] + [cut(clip, theta, m, ET, gT)[0] for m in bundle[c]]))
+        return sum(out)
+    add(cur)
     n_eval = 1
     log.add(0, cur.G, cur, 0.0, 1)
     g0 = cur.G + extra(cur)
@@ -127,33 +165,36 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
             reason = f"G below {g_abs:g} x G_initial"
             it -= 1
             break
-        if not bundle:
+        if not any(bundle):
             reason = "no counterexample: the solver found no motion below E(X_T)"
             it -= 1
             break
-        ET, gT, _, _ = nio.measure(cur.theta, nio.target)
-        cuts = [cut(nio, cur.theta, m, ET, gT) for m in bundle]
+        meas = [clip.measure(cur.theta, clip.target)[:2] for clip in clips]
+        cuts, groups = [], []
+        for c, clip in enumerate(clips):
+            cuts += [cut(clip, cur.theta, m, *meas[c]) for m in bundle[c]]
+            groups += [c] * len(bundle[c])
         # G(θ_c) with everything known now (later counterexamples can reveal a larger G)
-        prev = max(0.0, max(c[0] for c in cuts)) + extra(cur)
+        Gc = [max([0.0] + [L for (L, _), k in zip(cuts, groups) if k == c]) for c in range(nc)]
+        prev = sum(Gc) + extra(cur)
         tries = 0
         accepted = False
         while r >= min_trust and tries < max_tries:
             th_new, model = model_step(cur.theta, cuts, r, scales, floor, ties,
-                                       P(cur.theta) if prior_weight > 0 else None)
+                                       P(cur.theta) if prior_weight > 0 else None, groups)
             pred = prev - model
             if pred <= 1e-12 * max(prev, 1e-300):
                 r *= 0.5
                 continue
-            new = nio.evaluate(th_new, tuple(bundle))
+            new = prob.evaluate(th_new, bundle)
             tries += 1
             n_eval += 1
-            if new.G > 0:
-                bundle.append(new.motion_S)
-                bundle = bundle[-max_cuts:]
-            c_new = cut(nio, cur.theta, new.motion_S, ET, gT)
-            prev = max(prev, c_new[0] + extra(cur))
+            add(new)
+            c_new = [cut(clip, cur.theta, new.parts[c].motion_S, *meas[c]) for c, clip in enumerate(clips)]
+            Gc = [max(Gc[c], c_new[c][0]) for c in range(nc)]
+            prev = sum(Gc) + extra(cur)
             actual = prev - (new.G + extra(new))
-            if nio.verbose:
+            if prob.verbose:
                 print(f"    trial r={r:.3g}: G(θ_c)={prev:.5g} model={model:.5g} G(trial)={new.G + extra(new):.5g}",
                       flush=True)
             if actual > 0:
@@ -164,7 +205,8 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
                     r = min(max_trust, 2 * r)
                 break
             r *= 0.5
-            cuts.append(c_new)
+            cuts += c_new
+            groups += list(range(nc))
         if not accepted:
             log.add(it, prev - extra(cur), cur, 0.0, tries)
             fails += 1
@@ -181,8 +223,6 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
             reason = f"relative decrease < {rtol} for {patience} iterations"
             break
     # G(θ0) re-read with every counterexample found: the first solve alone can underestimate it
-    ET0, gT0, _, _ = nio.measure(th, nio.target)
-    g_init = max([log.records[0].G] + [cut(nio, th, m, ET0, gT0)[0] for m in bundle])
-    ET1, gT1, _, _ = nio.measure(cur.theta, nio.target)
-    g_fin = max([0.0] + [cut(nio, cur.theta, m, ET1, gT1)[0] for m in bundle])
+    g_init = bound(th, [p.G for p in first.parts])
+    g_fin = bound(cur.theta)
     return log.result(style_from_theta(cur.theta), cur, g_init, g_fin, n_eval, reason)

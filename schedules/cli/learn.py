@@ -1,4 +1,6 @@
-"""``compose learn CLIP.bvh --frames A:B [--body PRESET] -o STYLE.yaml``: learn a style by NIO."""
+"""``compose learn CLIP.bvh --frames A:B [--body PRESET] -o STYLE.yaml``: learn a style by NIO;
+``compose learn A.bvh:A:B B.bvh:C:D … -o STYLE.yaml``: one style from several clips (or
+segments) of one person (:mod:`scenegraph.nio.multi`)."""
 from __future__ import annotations
 
 import sys
@@ -9,7 +11,11 @@ import numpy as np
 
 from scenarios.errors import ComposeError, InputError
 
-__all__ = ["register", "parse_frames", "clip_target", "learn_from_bvh"]
+__all__ = ["register", "parse_frames", "parse_clip_spec", "clip_specs", "clip_target", "learn_from_bvh",
+           "learn_from_clips"]
+
+
+PROJECTION_ITER = 200  # IPOPT iterations of the projection of X_T onto its footsteps (clip_target)
 
 
 def parse_frames(text: str) -> tuple[int, int]:
@@ -21,6 +27,47 @@ def parse_frames(text: str) -> tuple[int, int]:
     if a < 0 or b <= a + 1:
         raise InputError(f"--frames {text}: need 0 <= A and at least 2 frames (B > A + 1)")
     return a, b
+
+
+def parse_clip_spec(text: str) -> tuple[str, tuple[int, int] | None]:
+    """"PATH:A:B" → (PATH, (A, B)); a plain "PATH" (no colon-separated frame range) → (PATH, None).
+
+    A colon-separated tail that is not two integers is an error (``InputError``) naming the
+    form expected, unless the whole text is an existing file."""
+    text = str(text)
+    if ":" not in text or Path(text).is_file():
+        return text, None
+    parts = text.rsplit(":", 2)
+    if len(parts) != 3 or not parts[0]:
+        raise InputError(f"clip {text!r}: expected PATH or PATH:A:B (frames A to B, B exclusive)")
+    try:
+        frames = parse_frames(f"{parts[1]}:{parts[2]}")
+    except InputError as exc:
+        raise InputError(f"clip {text!r}: expected PATH:A:B with integer frames A < B - 1 ({exc})") from None
+    return parts[0], frames
+
+
+def clip_specs(texts, frames_opt: str | None) -> list[tuple[str, tuple[int, int]]]:
+    """The (path, frames) of every clip argument of ``compose learn``: each "PATH:A:B", or
+    one plain "PATH" with ``--frames A:B``.  Errors (``InputError``): a clip without frames,
+    ``--frames`` together with PATH:A:B, ``--frames`` for several clips, a clip given twice."""
+    specs = [parse_clip_spec(t) for t in texts]
+    if frames_opt is not None:
+        if len(specs) > 1:
+            raise InputError("--frames is for one clip: give each of several clips its frames as PATH:A:B")
+        if specs[0][1] is not None:
+            raise InputError(f"clip {texts[0]!r} has frames already: drop --frames {frames_opt}")
+        specs = [(specs[0][0], parse_frames(frames_opt))]
+    for text, (path, fr) in zip(texts, specs):
+        if fr is None:
+            raise InputError(f"clip {text!r}: no frames (use PATH:A:B, or --frames A:B with one clip)")
+    seen = set()
+    for path, fr in specs:
+        key = (str(Path(path).resolve()), fr)
+        if key in seen:
+            raise InputError(f"clip {path}:{fr[0]}:{fr[1]} is given twice")
+        seen.add(key)
+    return specs
 
 
 def _to_spacetime_steps(ch, steps, t0: float, t1: float):
@@ -108,7 +155,8 @@ def _widen(steps, half: float):
 
 
 def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz: float = 10.0,
-                reconstruct: bool = True, feasible: bool = True, onesided: bool = False):
+                reconstruct: bool = True, feasible: bool = True, onesided: bool = False,
+                height: float | None = None, mass: float | None = None):
     """(character, X_T motion, footsteps, clip) for NIO from a BVH file's frames [A, B).
 
     X_T: the smooth reconstruction (Appendix A; a plain spline fit if ``reconstruct`` is
@@ -119,7 +167,8 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     X_T with motions that satisfy C.  With ``onesided`` the contacts are detected with
     one-sided speeds (:func:`scenegraph.mocap.contacts.point_speed`) and widened by half a frame
     (:func:`_widen`): without it a brisk walk (07_12, 1.9 m/s, 30 fps) comes out as a run
-    with 0.07–0.1 s flight phases and ball-only contacts."""
+    with 0.07–0.1 s flight phases and ball-only contacts.  ``height`` (m) / ``mass`` (kg): the
+    character's (default: the clip's estimated stature, the preset's body-mass index)."""
     from scenegraph.mocap.contacts import detect_footsteps
     from scenegraph.mocap.clip import load_clip
     from scenegraph.model.motion import Motion
@@ -127,7 +176,7 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     p = Path(path)
     if not p.is_file():
         raise InputError(f"no such clip file: {path}")
-    clip = load_clip(p, frames=frames, preset=body)
+    clip = load_clip(p, frames=frames, preset=body, height=height, mass=mass)
     times = np.asarray(clip.times, float)
     if reconstruct:  # Appendix A: smooth, root residual softly zero
         from scenegraph.mocap.clip import reconstruct_clip
@@ -154,20 +203,27 @@ def clip_target(path, frames: tuple[int, int], body: str = "adult_male", ctrl_hz
     if feasible:
         from scenegraph.nio import feasible_target, joint_rms_deg, resample
 
-        res = feasible_target(clip.character, resample(motion), steps)
+        res = feasible_target(clip.character, resample(motion), steps, max_iter=PROJECTION_ITER)
         # a projection stopped early can be far from the clip (08_02 at 400 iterations: 15.7°
-        # away, converged at 544: 0.56°), so it must converge and stay near the clip
+        # away, converged at 544: 0.56°), so it must stay near the clip; and it must hold C.
+        # It need not reach IPOPT's tolerance: with the dense dynamics the projection of 07_01
+        # 64:201 stalls there (objective 40.3892 at 150 iterations, 40.3884 at 400 and still
+        # not converged at 1500 — 1145 s; C to 1e-8 m, 2.15° from the reconstruction, measured)
         dev = joint_rms_deg(res.motion, motion)
-        if not res.success or max(res.violations.values(), default=0.0) > 1e-3 or dev > 3.0:
+        viol = max(res.violations.values(), default=0.0)
+        held = viol <= 1e-3 if res.success else (res.status.startswith("Maximum_Iterations") and viol <= 1e-5)
+        if not held or dev > 3.0:
             raise InputError(f"{path} frames {frames[0]}:{frames[1]}: the reconstruction cannot be moved onto "
                              f"its footsteps ({res.summary()}; {dev:.1f}° RMS from the reconstruction)")
         motion = res.motion
     return clip.character, motion, steps, clip
 
 
-def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, resynth: dict | None = None,
+def save_learned(res, out, clip_name, frames: tuple[int, int] | None, body: str, resynth: dict | None = None,
                  resynth_warm: dict | None = None, resynth_example: dict | None = None) -> None:
-    """Write a learned style with its provenance (and, when measured, the re-synthesis RMS)."""
+    """Write a learned style with its provenance (and, when measured, the re-synthesis RMS).
+    ``clip_name``: the clip's file name (with ``frames``), or a list of (file name, frames) of
+    several clips (``frames`` None)."""
     from scenegraph.model.style import Provenance, save_style
 
     prov = res.style.provenance.model_dump() if res.style.provenance else {}
@@ -178,7 +234,14 @@ def save_learned(res, out, clip_name: str, frames: tuple[int, int], body: str, r
     if resynth_example:  # nio.resynthesize_from_example: the paper's initial motion
         prov["resynth_example_rms_deg"] = dict(resynth_example)
     style = res.style.model_copy(update={"provenance": Provenance(**prov)})
-    save_style(style, out, header=f"# learned by: compose learn {clip_name} --frames {frames[0]}:{frames[1]} "
+    if isinstance(clip_name, str):
+        clip_name = [(clip_name, frames)]
+    if len(clip_name) == 1:
+        (name, fr), = clip_name
+        clips = f"{name} --frames {fr[0]}:{fr[1]}"
+    else:
+        clips = " ".join(f"{name}:{fr[0]}:{fr[1]}" for name, fr in clip_name)
+    save_style(style, out, header=f"# learned by: compose learn {clips} "
                                   f"--body {body}{_option_flags(prov)} -o {Path(out).name}\n")
 
 
@@ -204,11 +267,27 @@ def _option_flags(prov: dict) -> str:
 
 def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=None, name=None,
                    progress=None, onesided: bool = False, **run_kw):
-    from scenegraph.nio import learn_style
+    """Learn a style from frames [A, B) of one BVH clip: :func:`learn_from_clips` with one clip."""
+    return learn_from_clips([(path, frames)], body, out, name, progress, onesided, **run_kw)
 
-    ch, motion, steps, clip = clip_target(path, frames, body, onesided=onesided)
-    res = learn_style(ch, motion, steps, name=name or Path(out or path).stem, clip=Path(path).name,
-                      frames=f"{frames[0]}:{frames[1]}", body=body, callback=progress, **run_kw)
+
+def learn_from_clips(specs, body: str = "adult_male", out=None, name=None, progress=None, onesided: bool = False,
+                     **run_kw):
+    """Learn one style from the (path, (A, B)) clips ``specs`` of one person (the first clip's
+    character — its stature and mass — for all of them); returns (result, (character, X_T,
+    footsteps, clip) of the first clip).  Writes ``out`` when given."""
+    from scenegraph.nio import learn_multi
+
+    targets, first = [], None
+    for path, frames in specs:
+        kw = {} if first is None else {"height": first[0].height, "mass": first[0].total_mass}
+        ch, motion, steps, clip = clip_target(path, frames, body, onesided=onesided, **kw)
+        first = first or (ch, motion, steps, clip)
+        targets.append((motion, steps))
+    names = [Path(p).name for p, _ in specs]
+    ranges = [f"{a}:{b}" for _, (a, b) in specs]
+    res = learn_multi(first[0], targets, name=name or Path(out or specs[0][0]).stem, clip=names, frames=ranges,
+                      body=body, callback=progress, **run_kw)
     if onesided:  # the provenance records the contact rule (evaluate-style and the header read it)
         from scenegraph.model.style import Provenance
 
@@ -217,8 +296,8 @@ def learn_from_bvh(path, frames: tuple[int, int], body: str = "adult_male", out=
 
         res = _replace(res, style=res.style.model_copy(update={"provenance": Provenance(**prov)}))
     if out is not None:
-        save_learned(res, out, Path(path).name, frames, body)
-    return res, (ch, motion, steps, clip)
+        save_learned(res, out, [(n, fr) for n, (_, fr) in zip(names, specs)], None, body)
+    return res, first
 
 
 def _cmd_learn(args) -> int:
@@ -226,20 +305,23 @@ def _cmd_learn(args) -> int:
 
     from schedules.cli.preview import output_path
 
-    frames = parse_frames(args.frames)
-    # every argument is checked before the clip is read and NIO runs for minutes
+    specs = clip_specs(args.clip, args.frames)
+    # every argument is checked before the clips are read and NIO runs for minutes
     if args.alpha_prior < 0:
         raise InputError(f"--alpha-prior {args.alpha_prior}: must be >= 0")
     if not 0.0 <= args.alpha_floor <= 1.0:
         raise InputError(f"--alpha-floor {args.alpha_floor}: must lie in [0, 1] (units of 1/M; Σα = 1)")
     if args.max_iter < 1:
         raise InputError(f"--max-iter {args.max_iter}: must be at least 1")
-    clip = Path(args.clip)
-    out = output_path(args.output, clip.with_suffix(".yaml"), "-o/--output", (".yaml", ".yml"))
-    if not clip.is_file():
-        raise InputError(f"no such clip file: {args.clip}" if not clip.exists() else f"{args.clip} is not a file")
-    if out.resolve() == clip.resolve():
-        raise InputError(f"-o/--output {out}: is the clip itself")
+    if len(specs) > 1 and args.counterexamples != "local":
+        raise InputError("several clips learn with local counterexamples only (drop --counterexamples ipopt)")
+    out = output_path(args.output, Path(specs[0][0]).with_suffix(".yaml"), "-o/--output", (".yaml", ".yml"))
+    for path, _ in specs:
+        clip = Path(path)
+        if not clip.is_file():
+            raise InputError(f"no such clip file: {path}" if not clip.exists() else f"{path} is not a file")
+        if out.resolve() == clip.resolve():
+            raise InputError(f"-o/--output {out}: is the clip {path} itself")
     t0 = time.perf_counter()
 
     def progress(rec):
@@ -247,27 +329,31 @@ def _cmd_learn(args) -> int:
               f"E(X_T) = {rec.E_target:.6g}  E(X_S) = {rec.E_counter:.6g}  beta = {rec.beta:g}  "
               f"[{rec.seconds:.0f} s]", file=sys.stderr, flush=True)
 
-    print(f"compose learn: {args.clip} frames {args.frames} body {args.body}", file=sys.stderr, flush=True)
+    what = ", ".join(f"{p} frames {a}:{b}" for p, (a, b) in specs)
+    print(f"compose learn: {what}, body {args.body}", file=sys.stderr, flush=True)
     try:
-        res, _ = learn_from_bvh(args.clip, frames, args.body, args.output, progress=progress,
+        res, _ = learn_from_clips(specs, args.body, args.output, progress=progress,
                                 max_iter=args.max_iter, local=args.counterexamples == "local",
                                 hessian=args.hessian, alpha_floor=args.alpha_floor / N_JOINT,
                                 prior_weight=args.alpha_prior, tie=args.tie, onesided=args.contacts == "onesided")
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
-        raise InputError(f"{args.clip}: {exc}") from None
+        raise InputError(f"{', '.join(p for p, _ in specs)}: {exc}") from None
     print(f"compose learn: G {res.g_initial:.6g} -> {res.g_final:.6g} in {res.iterations} iterations "
           f"({res.stop_reason}), {time.perf_counter() - t0:.0f} s; wrote {args.output}", file=sys.stderr)
     return 0
 
 
 def register(sub) -> None:
-    p = sub.add_parser("learn", help="learn a physical style from a BVH clip (Nonlinear Inverse Optimization)",
-                       description="Learn a physical style θ from frames A:B (B exclusive) of a BVH clip "
-                                   "and write it as a style YAML file with its provenance.")
-    p.add_argument("clip", metavar="CLIP.bvh")
-    p.add_argument("--frames", required=True, metavar="A:B", help="source frames A to B (exclusive)")
+    p = sub.add_parser("learn", help="learn a physical style from BVH clips (Nonlinear Inverse Optimization)",
+                       description="Learn a physical style θ from frames A:B (B exclusive) of a BVH clip, or "
+                                   "from several clips (or segments) of one person given as PATH:A:B "
+                                   "(one NIO: the sum of the clips' G), and write it as a style YAML file "
+                                   "with its provenance.")
+    p.add_argument("clip", metavar="CLIP.bvh[:A:B]", nargs="+",
+                   help="a clip with --frames A:B, or one or more PATH:A:B (the first gives the example poses)")
+    p.add_argument("--frames", default=None, metavar="A:B", help="source frames A to B (exclusive) of a single clip")
     p.add_argument("--body", default="adult_male", choices=("adult_male", "adult_female", "child"),
                    help="body preset (default adult_male)")
     p.add_argument("-o", "--output", required=True, metavar="STYLE.yaml")

@@ -2,7 +2,7 @@
 
     python tests/benchmarks/bench_heldout.py [--mocap DIR] [--out DIR] [--max-iter 300] [--learn-iter 200]
                                              [--alpha-prior W] [--tie none|lr|groups]
-                                             [--synth-tol TOL] [--hessian gauss_newton|exact]
+                                             [--synth-tol TOL] [--hessian gauss_newton|exact] [--multi]
 
 Two validation trials, each learned and predicted here (nothing is read from the shipped styles):
 
@@ -12,6 +12,12 @@ Two validation trials, each learned and predicted here (nothing is read from the
 - **turn**: a style learned from one stride of the straight part of 16_18 (frames 69:210,
   left strike to left strike, heading within 7° of +Z), predicting the 90° left turn that
   follows (frames 209:430, the turn is at source frames ~277–372).
+
+With ``--multi`` each style is learned from two non-identical segments of the training
+performance in one NIO (``compose learn A.bvh:a:b A.bvh:c:d``, :mod:`scenegraph.nio.multi`):
+07_01 64:201 (left strike to left strike) and 130:262 (right strike to right strike); 16_18
+69:210 and 1:140 (the walk's start, still straight).  The first segment gives the example poses
+and is the training clip evaluate-style reads.
 
 Both learn with the contacts of ``compose evaluate-style`` (one-sided speeds, widened by half a
 frame; ``clip_target(onesided=True)``).  Each prediction is ``compose evaluate-style``'s
@@ -37,12 +43,13 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from schedules.cli.evaluate import VARIANTS, _jsonable, evaluate_style, plot_curves  # noqa: E402
-from schedules.cli.learn import learn_from_bvh  # noqa: E402
+from schedules.cli.learn import learn_from_clips  # noqa: E402
 
 TRIALS = (  # name, training clip, training frames, test clip, test frames
     ("speed", "walk_neutral_cmu_07_01.bvh", (64, 201), "walk_brisk_cmu_07_12.bvh", (2, 264)),
     ("turn", "walk_turn_left_cmu_16_18.bvh", (69, 210), "walk_turn_left_cmu_16_18.bvh", (209, 430)),
 )
+SECOND = {"speed": (130, 262), "turn": (1, 140)}  # --multi: a second segment of the training clip
 
 
 def _mocap_dir(arg: str | None) -> Path:
@@ -65,6 +72,7 @@ def main() -> None:
                     help="IPOPT tolerance of the dynamic syntheses (evaluate-style --tol; default 1e-4)")
     ap.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
                     help="Hessian of the dynamic syntheses (evaluate-style --hessian)")
+    ap.add_argument("--multi", action="store_true", help="learn each style from two segments of its training clip")
     ap.add_argument("--only", choices=[t[0] for t in TRIALS], default=None, help="one trial only (a partial line)")
     args = ap.parse_args()
     mocap, out = _mocap_dir(args.mocap), Path(args.out)
@@ -75,11 +83,13 @@ def main() -> None:
             continue
         style_path = out / f"{name}_style.yaml"
         t0 = time.perf_counter()
-        res, _ = learn_from_bvh(mocap / train, tframes, "adult_male", style_path, name=f"heldout_{name}",
-                                onesided=True, max_iter=args.learn_iter, prior_weight=args.alpha_prior,
-                                tie=args.tie)
+        specs = [(mocap / train, tframes)] + ([(mocap / train, SECOND[name])] if args.multi else [])
+        res, _ = learn_from_clips(specs, "adult_male", style_path, name=f"heldout_{name}",
+                                  onesided=True, max_iter=args.learn_iter, prior_weight=args.alpha_prior,
+                                  tie=args.tie)
         learn_s.append(time.perf_counter() - t0)
-        print(f"{name}: learned from {train} {tframes[0]}:{tframes[1]} in {learn_s[-1]:.1f} s "
+        segs = " + ".join(f"{a}:{b}" for _, (a, b) in specs)
+        print(f"{name}: learned from {train} {segs} in {learn_s[-1]:.1f} s "
               f"(G {res.g_initial:.4g} -> {res.g_final:.4g}, {res.iterations} iterations, {res.stop_reason})",
               flush=True)
         rep = evaluate_style(style_path, mocap / test, sframes, "adult_male", args.max_iter,
