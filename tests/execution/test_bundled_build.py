@@ -8,7 +8,8 @@ Hessian and constraint Jacobian, which are ~70 % of a transcription's build time
 on walk_to: 6.3 s with them, ~1.5 s without, one core).  The objective and constraints are
 then evaluated at the start point and must be finite.  This catches a Step the executor
 cannot lower, a term that names a missing goal, a window that frees nothing, and a bad NLP
-shape, in every scenario the project ships.
+shape, in every scenario the project ships.  A bundled edit scenario (an ``edit:`` block, no
+schedule) is smoke-tested by running its edit (no IPOPT solve of the motion; the clip fit, ~9 s).
 """
 from __future__ import annotations
 
@@ -59,3 +60,27 @@ def test_every_step_of_a_bundled_scenario_lowers_and_transcribes(name):
             g = np.asarray(nlp.g_fn(nlp.x0, nlp.p0)).ravel()
             assert np.isfinite(f) and np.all(np.isfinite(g)), step.id
             assert g.size == nlp.lbg.size
+
+
+def _bundled_edits() -> list[str]:
+    from scenarios.bundled import bundled_scenarios
+    return sorted(set(bundled_scenarios()) - set(bundled_syntheses()))
+
+
+def test_the_edit_scenarios_are_the_ones_without_a_schedule():
+    assert _bundled_edits() == ["edit_broad_jump"]
+
+
+@pytest.mark.parametrize("name", _bundled_edits())
+def test_every_bundled_edit_scenario_edits_its_clip(name, tmp_path):
+    """An edit scenario (scenarios/edit_block.py) has no steps: its smoke test is the edit itself —
+    the clip loads and fits, the edit runs, the stage, BVH and report are written, and the report's
+    goals (distance, apex, turn, momentum correlation, ballistic flight) hold."""
+    from scenarios.bundled import find_scenario
+    from schedules.execution.edit_run import run_edit
+    import io
+    scn = load_scenario(name)
+    assert scn.is_edit
+    rep = run_edit(scn, find_scenario(name), tmp_path / "e.usda", tmp_path / "r.json", 120.0, io.StringIO())
+    assert (tmp_path / "e.usda").is_file() and (tmp_path / "e.bvh").is_file() and (tmp_path / "r.json").is_file()
+    assert rep["passes"], rep["goals"]
