@@ -15,7 +15,8 @@ stalled early (172 vs 600 iterations) at a higher energy (4172 vs 3873) with its
 worse (penetration 12.5 vs 5.0 mm, stance slide 32 vs 10 mm).
 
 with P, H functions of the pose q and velocity q̇ only (:func:`momenta_fn`, plain CasADi SX
-algebra of the forward kinematics: the NLP gets their exact second derivatives).  This
+algebra of the forward kinematics: exact first derivatives; their curvature is left out of
+the Gauss-Newton Lagrangian Hessian, docs/dynamic-motion.md).  This
 replaces the stiff least-squares term (root residual weighted W_FLIGHT = 1e6 in flight,
 formulation (a)) whose ill-conditioning made IPOPT spend most of a jump's iterations on it;
 the root residual keeps its ordinary weight W_ROOT in flight (it still counts in the energy,
