@@ -2,8 +2,9 @@
 Dask ``processes`` with 2 worker processes) on a small scene.
 
 A 0.6 s walk (one character, a timing and a full step after the kinematic pre-solve),
-IPOPT capped at 10 iterations per subproblem: the point is that every path computes the
-same numbers from the same inputs, not that they converge.  Compared: every step record
+IPOPT capped at 25 iterations per subproblem: the point is that every path computes the
+same numbers from the same inputs, not that they converge (at 10 the full step, with the
+contact terms of round 11, ends with a footstep row 0.26 mm outside tolerance and fails).  Compared: every step record
 (status, iterations, energy, violations, the pre-solve summary) and the final Scene —
 control points, timewarp and footsteps of the character, bit for bit — which is all the
 stage and report are made from.  (The slow test_distributed_runs.py also compares the
@@ -50,7 +51,7 @@ def _facts(result) -> tuple:
 
 
 def test_plain_sync_and_processes_give_identical_results(tmp_path, monkeypatch):
-    monkeypatch.setenv("COMPOSE_MAX_ITER", "10")
+    monkeypatch.setenv("COMPOSE_MAX_ITER", "25")
     scn = parse_scenario(TINY_WALK, "tiny.yaml", base_dir=tmp_path)
     schedule = compile_schedule(scn)
     scene = build_scene(scn)
