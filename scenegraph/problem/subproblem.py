@@ -121,7 +121,7 @@ class Subproblem:
     no_slip_weight: float = 0.0  # s/m²: foot handles near the floor do not move horizontally
     # (scenegraph/problem/no_slip.py; 0: off; full dynamics only)
     root_force_ref: float = 0.5  # body weights: outside flight the root residual's weight grows as
-    # 1 + (F_ref / (F_n + F_0))² with F_n the vertical ground force (transcription.root_force_factor),
+    # 1 + (F_ref / (F_n + F_0))² with F_n the start's vertical ground force (transcription.root_force_factor),
     # so its centre-of-pressure shift (residual moment / F_n) is held where the feet carry little (0: off)
     contact_hz: float = 120.0  # samples per second of those two terms (world s of the initial motion)
     window_only: bool = False  # transcribe only the collocation points the window's free control

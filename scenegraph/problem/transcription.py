@@ -215,7 +215,8 @@ F0_ROOT = 0.02  # body weights: the floor of F_n in root_force_factor (a touch-d
 def root_force_factor(fn, mg: float, f_ref: float, on=1.0):
     """Factor on the root residual rows (their weight is w_r times its square): sqrt(1 + (F_ref /
     (F_n + F_0))²) where ``on`` (1 outside flight), 1 elsewhere.  F_n (N, ≥ 0) is the vertical ground
-    force the planted handles and the shoe carry at the point, F_ref = ``f_ref`` m g and F_0 = F0_ROOT m g.
+    force the planted handles carry at the point in the start's contact forces (``transcribe`` holds
+    it fixed), F_ref = ``f_ref`` m g and F_0 = F0_ROOT m g.
 
     Why: a root residual wrench is a force nothing in the scene supplies.  An auditor that reads
     only the motion puts the ground reaction's centre of pressure at (residual moment) / F_n away
@@ -535,9 +536,6 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         Fmap[r0:r0 + 3, 4 * c:4 * c + 4] = mg * Vc[c]
     Fc = ca.reshape(ca.mtimes(_sparse(Fmap), xL), 3 * len(FORCE_HANDLES), N)
     Fc = ca.mtimes(Fc, _sparse(Mev))  # piecewise linear in s between the nodes: (24, Ne)
-    zrows = np.zeros((1, 3 * len(FORCE_HANDLES)))
-    zrows[0, 2::3] = 1.0
-    Fn = ca.mtimes(_sparse(zrows), Fc)  # (1, Ne) vertical ground force of the planted handles, N
 
     # parameters: fixed data and per-point style
     TH = ca.MX.sym("theta", N_THETA, N)
@@ -595,7 +593,6 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             place = np.zeros((3 * len(FORCE_HANDLES), 1))
             place[3 * FORCE_HANDLES.index(f"heel_{side}") + 2, 0] = 1.0
             Fc = Fc + ca.mtimes(_sparse(place), fz)
-            Fn = Fn + fz
     kern = compiled_kernel(ch).map(Ne)
     QQ = kern(Q, Qd, Qdd, Fc, TH_k)  # (35, Ne)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
@@ -606,8 +603,16 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     rho_0 = ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1) * QQ[N_JOINT:, :]
     root_factor = None
     if sp.dynamics == "full" and sp.root_force_ref > 0 and n_lam:
+        # F_n from the start's contact forces (sp.contact_guess: the previous step's), held fixed: a
+        # weight that fell as the NLP's own λ grew was measured to buy residual with extra normal force
+        # (springy_run: 120 Hz root residual 0.019 -> 0.081 bw, CoP unchanged; docs/results.md)
+        lam0 = _lambda_guess(sp, planted, s, mg)
+        fn_k = np.zeros(N)
+        for c, (_, k, _, _) in enumerate(planted):
+            if c not in zero_force:
+                fn_k[k] += float((mg * Vc[c] @ lam0[4 * c:4 * c + 4])[2])
         on = ~flight_points(sp, s_ev) if sp.flights else np.ones(Ne, bool)
-        root_factor = root_force_factor(Fn, mg, sp.root_force_ref, ca.DM(on.astype(float)).T)
+        root_factor = ca.DM(root_force_factor(fn_k @ Mev, mg, sp.root_force_ref, on.astype(float))).T
         rho_0 = rho_0 * ca.repmat(root_factor, N_ROOT, 1)
     rho_dyn = ca.vec(ca.vertcat(rho_m, rho_0) * ca.repmat(wt, N_DOF, 1)) * scale
     energy = ca.sumsqr(ca.vec(rho_m * ca.repmat(wt, N_JOINT, 1)))  # Σ w T' α Q_m²
@@ -825,7 +830,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             # those curvature terms are left out (Gauss–Newton in them).
             if sp.dynamics != "kinematic":
                 C0 = ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)
-                if root_factor is not None:  # the factor's own dependence on λ is Gauss–Newton here
+                if root_factor is not None:  # numbers (the start's forces)
                     C0 = C0 * ca.repmat(root_factor, N_ROOT, 1)
                 C = scale * ca.vertcat(SA_ev, C0) * ca.repmat(wt, N_DOF, 1)
                 Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, Ne) * C
