@@ -43,7 +43,7 @@ def walk_nlps():
     t = np.linspace(m.start, m.end, 400)
     fz = np.where(t < 0.5 * (m.start + m.end), 0.01, 1.0) * mg
     guess = {h: (t, np.stack([0 * fz, 0 * fz, fz], axis=1).ravel()) for h in CONTACT_HANDLES}
-    sp = Subproblem(CH, STYLE, m, steps, free=frozenset({"q"}), contact_guess=guess)
+    sp = Subproblem(CH, STYLE, m, steps, free=frozenset({"q"}), contact_guess=guess, root_force_ref=0.5)
     return transcribe(sp, derivatives=False), transcribe(replace(sp, root_force_ref=0.0), derivatives=False), mg
 
 
@@ -65,3 +65,7 @@ def test_root_rows_scaled_where_the_feet_carry_little(walk_nlps):
     ratio = r_on[N_JOINT:, :N][:, k] / r_off[N_JOINT:, :N][:, k]
     np.testing.assert_allclose(ratio, np.tile(want[k], (N_DOF - N_JOINT, 1)), rtol=1e-3)
     assert ratio.max() > 8 and ratio.min() < 1.2  # ≈ 12 at 0.02 bw, ≈ 1.1 at 2 bw: both cases are present
+
+
+def test_off_by_default():
+    assert Subproblem.__dataclass_fields__["root_force_ref"].default == 0.0
