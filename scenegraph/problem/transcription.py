@@ -341,7 +341,12 @@ def _node_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     h = 1.0 / (n_int * r)
     near = np.array([len(ends) > 0 and bool(np.any(np.abs(ends - u) < 0.3 * h)) for u in base])
     keep = base[is_knot | ~near]
-    grid = np.unique(np.r_[keep, ends])
+    extra = []
+    if sp.end_node_dt > 0 and len(ends):  # nodes at ± end_node_dt (world s) around each end, inside the motion
+        tw = m.time(ends)
+        extra = [float(v) for v in m.to_canonical(np.r_[tw - sp.end_node_dt, tw + sp.end_node_dt])
+                 if 0.0 < v < 1.0 and np.min(np.abs(ends - v)) > 0.1 * h]
+    grid = np.unique(np.r_[keep, ends, extra])
     out = [grid[0]]
     for v in grid[1:]:  # points within 1e-7 (a knot on an end): one node
         if v - out[-1] > 1e-7:
