@@ -120,14 +120,6 @@ class Subproblem:
     # (scenegraph/problem/stance_frame.py; 0: off; full dynamics only)
     no_slip_weight: float = 0.0  # s/m²: foot handles near the floor do not move horizontally
     # (scenegraph/problem/no_slip.py; 0: off; full dynamics only)
-    root_force_ref: float = 0.0  # body weights (0: off, the default): outside flight the root residual's
-    # weight grows as 1 + (F_ref / (F_n + F_0))² with F_n the start's vertical ground force
-    # (transcription.root_force_factor), to hold its centre-of-pressure shift (residual moment / F_n)
-    # where the feet carry little.  Off: at 0.5 it did not bring springy_run's stage CoP under 1 cm
-    # (4.53 -> 4.43 cm) and raised its 120 Hz root residual to the audit's limit (docs/results.md)
-    end_node_dt: float = 0.0  # s (0: off, the default): dense dynamics also get nodes this far before and after
-    # every contact, flight and shoe-gate end (where a force ramps from 0).  Off: at 1/120 s springy_run's stage
-    # CoP went 4.55 -> 4.78 cm and its timing step hit its cap (docs/results.md)
     contact_hz: float = 120.0  # samples per second of those two terms (world s of the initial motion)
     window_only: bool = False  # transcribe only the collocation points the window's free control
     # points reach (a window's cost independent of the scene's length); receding windows use it —

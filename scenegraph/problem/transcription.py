@@ -77,7 +77,7 @@ from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "root_force_factor", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
+__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
            "FREE_WEIGHT_MIN"]
 
 W_FLIGHT = 1e6  # root residual weight in flight stages (W_ROOT elsewhere): a jump's flight is ballistic
@@ -209,26 +209,6 @@ def flight_root_weights(sp: Subproblem, s: np.ndarray, w_r: float) -> np.ndarray
     return w
 
 
-F0_ROOT = 0.02  # body weights: the floor of F_n in root_force_factor (a touch-down node has F_n = 0)
-
-
-def root_force_factor(fn, mg: float, f_ref: float, on=1.0):
-    """Factor on the root residual rows (their weight is w_r times its square): sqrt(1 + (F_ref /
-    (F_n + F_0))²) where ``on`` (1 outside flight), 1 elsewhere.  F_n (N, ≥ 0) is the vertical ground
-    force the planted handles carry at the point in the start's contact forces (``transcribe`` holds
-    it fixed), F_ref = ``f_ref`` m g and F_0 = F0_ROOT m g.
-
-    Why: a root residual wrench is a force nothing in the scene supplies.  An auditor that reads
-    only the motion puts the ground reaction's centre of pressure at (residual moment) / F_n away
-    from the one compose's contact forces have, so the same 2 N m that is harmless at 1 body
-    weight is 3 cm at 0.07 bw (springy_run's touch-downs, docs/results.md).  With this factor the
-    weight on the residual's CoP shift is the same at every F_n below F_ref: the weight of the
-    residual at F_ref.  Above F_ref it tends to 1 (the paper's w_r).  Works on numbers or casadi."""
-    g = ca if isinstance(fn, (ca.MX, ca.SX, ca.DM)) else np
-    r = (f_ref * mg) / (g.fmax(fn, 0.0) + F0_ROOT * mg)
-    return 1.0 + on * (g.sqrt(1.0 + r * r) - 1.0)
-
-
 def flight_points(sp: Subproblem, s: np.ndarray) -> np.ndarray:
     """Which canonical collocation times ``s`` lie in a flight of ``sp.flights``, its ends
     included: at the take-off and touch-down points the contact force is held at zero as well
@@ -341,12 +321,7 @@ def _node_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     h = 1.0 / (n_int * r)
     near = np.array([len(ends) > 0 and bool(np.any(np.abs(ends - u) < 0.3 * h)) for u in base])
     keep = base[is_knot | ~near]
-    extra = []
-    if sp.end_node_dt > 0 and len(ends):  # nodes at ± end_node_dt (world s) around each end, inside the motion
-        tw = m.time(ends)
-        extra = [float(v) for v in m.to_canonical(np.r_[tw - sp.end_node_dt, tw + sp.end_node_dt])
-                 if 0.0 < v < 1.0 and np.min(np.abs(ends - v)) > 0.1 * h]
-    grid = np.unique(np.r_[keep, ends, extra])
+    grid = np.unique(np.r_[keep, ends])
     out = [grid[0]]
     for v in grid[1:]:  # points within 1e-7 (a knot on an end): one node
         if v - out[-1] > 1e-7:
@@ -606,19 +581,6 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
     rho_m = SA_ev * QQ[:N_JOINT, :]
     rho_0 = ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1) * QQ[N_JOINT:, :]
-    root_factor = None
-    if sp.dynamics == "full" and sp.root_force_ref > 0 and n_lam:
-        # F_n from the start's contact forces (sp.contact_guess: the previous step's), held fixed: a
-        # weight that fell as the NLP's own λ grew was measured to buy residual with extra normal force
-        # (springy_run: 120 Hz root residual 0.019 -> 0.081 bw, CoP unchanged; docs/results.md)
-        lam0 = _lambda_guess(sp, planted, s, mg)
-        fn_k = np.zeros(N)
-        for c, (_, k, _, _) in enumerate(planted):
-            if c not in zero_force:
-                fn_k[k] += float((mg * Vc[c] @ lam0[4 * c:4 * c + 4])[2])
-        on = ~flight_points(sp, s_ev) if sp.flights else np.ones(Ne, bool)
-        root_factor = ca.DM(root_force_factor(fn_k @ Mev, mg, sp.root_force_ref, on.astype(float))).T
-        rho_0 = rho_0 * ca.repmat(root_factor, N_ROOT, 1)
     rho_dyn = ca.vec(ca.vertcat(rho_m, rho_0) * ca.repmat(wt, N_DOF, 1)) * scale
     energy = ca.sumsqr(ca.vec(rho_m * ca.repmat(wt, N_JOINT, 1)))  # Σ w T' α Q_m²
     root_energy = ca.sumsqr(ca.vec(QQ[N_JOINT:, :] * ca.repmat(wt, N_ROOT, 1)))
@@ -834,10 +796,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             # Hessian).  A free timewarp (and a spring's force, nonlinear in q) also curves z and C:
             # those curvature terms are left out (Gauss–Newton in them).
             if sp.dynamics != "kinematic":
-                C0 = ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)
-                if root_factor is not None:  # numbers (the start's forces)
-                    C0 = C0 * ca.repmat(root_factor, N_ROOT, 1)
-                C = scale * ca.vertcat(SA_ev, C0) * ca.repmat(wt, N_DOF, 1)
+                C = scale * ca.vertcat(SA_ev, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
                 Wk = 2 * lam_f * ca.reshape(rho_dyn, N_DOF, Ne) * C
                 nz = 3 * N_DOF + 3 * len(FORCE_HANDLES)
                 Hk = kernel_hessian(ch).map(Ne)(Q, Qd, Qdd, Fc, TH_k, Wk)  # (nz, nz Ne)
