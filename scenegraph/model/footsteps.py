@@ -19,7 +19,8 @@ from scenegraph.model.body import Character
 
 __all__ = ["Footstep", "contact_points", "WALK_HEEL", "WALK_BALL", "RUN_BALL", "footsteps_for_walk", "Gait",
            "GAITS", "CADENCE", "STANCE_FRACTION", "FOOT_WIDTH", "foot_length", "gait_footsteps",
-           "walk_footsteps", "standing_footsteps", "leap_footsteps", "LEAP_HEEL_LIFT", "LEAP_HEEL_DOWN", "HOP_SWAP"]
+           "walk_footsteps", "standing_footsteps", "leap_footsteps", "LEAP_HEEL_LIFT", "LEAP_HEEL_DOWN", "HOP_SWAP",
+           "planted_interval", "airborne_gaps"]
 
 WALK_HEEL = (0.0, 0.6)   # heel on the ground during this part of the stance
 WALK_BALL = (0.15, 1.0)  # ball on the ground during this part
@@ -79,6 +80,27 @@ def contact_points(ch: Character, step: Footstep, position=None,
 
 
 @functools.lru_cache(maxsize=16)
+def planted_interval(step: Footstep) -> tuple[float, float]:
+    """World s (first, last) instant at which any handle of ``step`` is planted."""
+    parts = [p for p in (step.heel, step.ball) if p is not None]
+    span = step.t1 - step.t0
+    return step.t0 + min(p[0] for p in parts) * span, step.t0 + max(p[1] for p in parts) * span
+
+
+def airborne_gaps(footsteps: tuple[Footstep, ...], min_gap: float = 1e-3) -> tuple[tuple[float, float], ...]:
+    """World s (lift-off, touch-down) of every interval between two planted intervals of the
+    plan in which no handle is planted — a running gait's flights.  The time before the first
+    and after the last footstep is not included (a motion's ends are not flights of the plan);
+    gaps shorter than ``min_gap`` s are contacts that merely touch."""
+    spans = sorted(planted_interval(f) for f in footsteps)
+    out, reach = [], None
+    for a, b in spans:
+        if reach is not None and a - reach > min_gap:
+            out.append((reach, a))
+        reach = b if reach is None else max(reach, b)
+    return tuple(out)
+
+
 def foot_length(ch: Character) -> float:
     """Heel-to-ball distance (m) of the character's foot (the ball handle's x minus the heel's)."""
     return float(ch.handle("ball_l").point[0] - ch.handle("heel_l").point[0])

@@ -2,9 +2,9 @@
 
 In flight only gravity acts on the body: its linear momentum P changes by −M g per second
 and its angular momentum H about the centre of mass is constant.  :func:`flight_constraints`
-states exactly that at the collocation points of each flight (its take-off and touch-down
-points included, where the contact force is held at zero too): for every point k after the
-flight's first point k0
+states exactly that at the evaluation points of each flight — the dense transcription's nodes
+and the midpoints between them (its take-off and touch-down nodes included, where the contact
+force is held at zero too): for every point k other than the flight's first node k0
 
     P(k) − P(k0) + M g (t_k − t_k0) e_z = 0,     H(k) − H(k0) = 0      (6 equalities per point)
 
@@ -77,8 +77,8 @@ def flight_groups(flights, motion, s: np.ndarray) -> list[np.ndarray]:
 
 def flight_constraints(ch: Character, groups: list[np.ndarray], Q, Qd, T) -> ca.MX | None:
     """The equalities of the module docstring (6 per flight point after each flight's first),
-    stacked; ``Q``, ``Qd`` (35, N) poses and world-time velocities at the collocation points,
-    ``T`` (1, N) their world times (MX: the timewarp may be free).  None without flights."""
+    stacked; ``Q``, ``Qd`` (35, N) poses and world-time velocities at the evaluation points,
+    ``T`` (1, N) their world times; each group's first index is its reference point (MX: the timewarp may be free).  None without flights."""
     if not groups:
         return None
     fn = momenta_fn(ch)

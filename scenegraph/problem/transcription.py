@@ -635,9 +635,11 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             add("clearance", rows, 0.0, np.inf, "ineq")
 
     if sp.dynamics == "full" and sp.flight_mode == "momentum" and sp.flights:  # ballistic flight (.flight)
-        dep = _depend_on_free(K, s, mask, warp_free)  # a window: only points its free control points move
-        fc = flight_constraints(ch, [k[dep[k]] for k in flight_groups(sp.flights, m, s) if dep[k].sum() >= 2],
-                                Q, Qd, ca.mtimes(_sparse(basis(nW, s, 0)), warp).T)
+        # at every evaluation point in flight, nodes and midpoints: stated at the nodes alone, a run's
+        # flights wiggled between them (0.05 body weight at 120 Hz, tackle, docs/results.md)
+        dep = _depend_on_free(K, s_ev, mask, warp_free)  # a window: only points its free control points move
+        fc = flight_constraints(ch, [k[dep[k]] for k in flight_groups(sp.flights, m, s_ev) if dep[k].sum() >= 2],
+                                Q, Qd, ca.mtimes(_sparse(basis(nW, s_ev, 0)), warp).T)
         if fc is not None:
             add("flight_momentum", fc, 0.0, 0.0)
     # footsteps: planted handles at their footprint on the ground

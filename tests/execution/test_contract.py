@@ -291,3 +291,35 @@ def test_free_timing_changes_the_solved_duration():
     c = solve_step(build_scene(scn), timing, ("walker",))["characters"]["walker"]
     assert c["success"], c["status"]
     assert 1.0 - 1e-6 <= c["warp"][-1] <= 2.0 + 1e-6 and abs(c["warp"][-1] - 1.4) > 0.02
+
+
+def test_a_runs_flights_are_ballistic_flights_of_its_full_steps_only():
+    """The gaps of a run's footstep plan become flights of the full steps (momentum equalities
+    in the NLP); a timing step (relaxed dynamics) gets none, a walk has none."""
+    from schedules.execution.lower import gait_flights
+    from scenegraph.model.footsteps import airborne_gaps
+    scn = load_scenario("springy_run")
+    scene = build_scene(scn)
+    order = compile_schedule(scn).order()
+    full = next(s for s in order if s.kind == "full")
+    who = scene.characters[0].name
+    sp, _ = lower(scene, full, who)
+    gaps = airborne_gaps(scene.character(who).footsteps)
+    assert gaps and set(gaps) <= set(sp.flights)
+    nlp = transcribe(sp, derivatives=False)
+    (rows,) = [sl for name, sl, _ in nlp.groups if name == "flight_momentum"]
+    # six equalities at every evaluation point in a flight (nodes and midpoints, ends included)
+    # but each flight's first: ballistic between the nodes too
+    t_ev = sp.motion.time(nlp.s_eval)
+    per = [int(np.sum((t_ev > a - 1e-6) & (t_ev < b + 1e-6))) for a, b in sp.flights]
+    assert all(n >= 3 for n in per)
+    assert rows.stop - rows.start == 6 * sum(n - 1 for n in per)
+    timing = [s for s in order if s.kind == "timing"]
+    for st in timing:
+        assert lower(scene, st, who)[0].flights == ()
+    # a jump goal's own flight is not stated twice
+    a, b = gaps[0]
+    assert gait_flights(scene.character(who).footsteps, ((a - 0.01, b + 0.01),)) == tuple(gaps[1:])
+    walk = build_scene(load_scenario("walk"))
+    wstep = next(s for s in compile_schedule(load_scenario("walk")).order() if s.kind == "full")
+    assert lower(walk, wstep, walk.characters[0].name)[0].flights == ()
