@@ -73,6 +73,7 @@ from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
 from scenegraph.problem.flight import flight_constraints, flight_groups
+from scenegraph.problem.gram import dynamics_gauss_newton
 from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
@@ -772,7 +773,12 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         # parts makes their derivatives cheap scalar code instead of MX graph evaluation.
         # (expand the plain functions first, then differentiate in SX: much cheaper to build)
         xs, ps = ca.SX.sym("x", x.shape[0]), ca.SX.sym("p", p.shape[0])
-        J_dyn = ca.jacobian(rho_dyn, x)
+        if sp.dynamics != "kinematic" and not warp_free:  # the same JᵀJ, point by point (.gram)
+            D = scale * ca.vertcat(SA_ev, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
+            JtJ_dyn = dynamics_gauss_newton(ch, ca.vertcat(Q, Qd, Qdd, Fc), TH_k, D, x)
+        else:
+            J_dyn = ca.jacobian(rho_dyn, x)
+            JtJ_dyn = ca.mtimes(J_dyn.T, J_dyn)
         rxs = ca.Function("rho_extra", [x, p], [rho_x]).expand()(xs, ps)
         J_x = ca.Function("J_extra", [xs, ps], [ca.jacobian(rxs, xs)])(x, p)
         gs = ca.Function("g_all", [x, p], [gg]).expand()(xs, ps)
@@ -786,7 +792,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
                 x, p, lam_g)
         else:
             Hc = ca.MX(x.shape[0], x.shape[0])
-        H = 2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x))
+        H = 2 * lam_f * (JtJ_dyn + ca.mtimes(J_x.T, J_x))
         if sp.hessian != "gauss_newton_objective":
             H = H + Hc
         if sp.hessian == "exact":
