@@ -72,7 +72,7 @@ from scenegraph.model.motion import basis
 from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
-from scenegraph.problem.flight import flight_constraints, flight_groups
+from scenegraph.problem.flight import flight_constraints, flight_groups, flight_jacobian
 from scenegraph.problem.gram import dynamics_gauss_newton
 from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
@@ -637,10 +637,13 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
 
     if sp.dynamics == "full" and sp.flight_mode == "momentum" and sp.flights:  # ballistic flight (.flight)
         dep = _depend_on_free(K, s, mask, warp_free)  # a window: only points its free control points move
-        fc = flight_constraints(ch, [k[dep[k]] for k in flight_groups(sp.flights, m, s) if dep[k].sum() >= 2],
-                                Q, Qd, ca.mtimes(_sparse(basis(nW, s, 0)), warp).T)
+        fgroups = [k[dep[k]] for k in flight_groups(sp.flights, m, s) if dep[k].sum() >= 2]
+        T_s = ca.mtimes(_sparse(basis(nW, s, 0)), warp).T
+        fc = flight_constraints(ch, fgroups, Q, Qd, T_s)
         if fc is not None:
             add("flight_momentum", fc, 0.0, 0.0)
+            flight_rows = fc
+            flight_jac = (lambda fgroups=fgroups, T_s=T_s: flight_jacobian(ch, fgroups, Q, Qd, T_s, x))
     # footsteps: planted handles at their footprint on the ground
     if pins:
         s_pin = np.array([pn[1] for pn in pins])
@@ -781,15 +784,21 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             JtJ_dyn = ca.mtimes(J_dyn.T, J_dyn)
         rxs = ca.Function("rho_extra", [x, p], [rho_x]).expand()(xs, ps)
         J_x = ca.Function("J_extra", [xs, ps], [ca.jacobian(rxs, xs)])(x, p)
-        gs = ca.Function("g_all", [x, p], [gg]).expand()(xs, ps)
-        if gg.shape[0]:
-            lam_s = ca.SX.sym("lam_s", gg.shape[0])
-            curved = np.ones(gg.shape[0])  # the flight momentum rows: no curvature (Gauss–Newton in them, .flight)
-            for name, sl, _ in groups:
-                if name == "flight_momentum":
-                    curved[sl] = 0.0
-            Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s * ca.DM(curved), gs), xs)[0]])(
-                x, p, lam_g)
+        # The flight momentum rows (.flight) stay MX, out of the SX expansion: expanded, the momenta's
+        # forward kinematics at every flight point made the SX Jacobian of g 38 s of broad_jump's 75 s
+        # build; CasADi differentiates the (SX) momenta function once and maps it instead.  They get
+        # no curvature in the Hessian (Gauss–Newton in them, as before).
+        is_fl = np.zeros(gg.shape[0], bool)
+        for name, sl, _ in groups:
+            if name == "flight_momentum":
+                is_fl[sl] = True
+        rest, frows = np.flatnonzero(~is_fl).tolist(), np.flatnonzero(is_fl).tolist()
+        g_rest = gg[rest] if frows else gg
+        gs = ca.Function("g_all", [x, p], [g_rest]).expand()(xs, ps)
+        if gs.shape[0]:
+            lam_s = ca.SX.sym("lam_s", gs.shape[0])
+            Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s, gs), xs)[0]])(
+                x, p, lam_g[rest] if frows else lam_g)
         else:
             Hc = ca.MX(x.shape[0], x.shape[0])
         H = 2 * lam_f * (JtJ_dyn + ca.mtimes(J_x.T, J_x))
@@ -816,7 +825,14 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         H = ca.triu(H)
         hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
-        jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
+        if frows:  # the SX rows and the MX flight rows, put back in g's order
+            g_r, J_r = ca.Function("jac_g_rest", [xs, ps], [gs, ca.jacobian(gs, xs)])(x, p)
+            back = ca.DM(ca.Sparsity.triplet(gg.shape[0], gg.shape[0], rest + frows, list(range(gg.shape[0]))), 1.0)
+            jac_g = ca.Function("nlp_jac_g", [x, p], [ca.mtimes(back, ca.vertcat(g_r, flight_rows)),
+                                                      ca.mtimes(back, ca.vertcat(J_r, flight_jac()))],
+                                ["x", "p"], ["g", "jac_g_x"])
+        else:
+            jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
     th = theta_kernel_vector(sp.style)
     sa = np.sqrt(np.asarray(sp.style.alpha, float))
     if sp.style_end is not None:
