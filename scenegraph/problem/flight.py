@@ -119,7 +119,12 @@ def flight_jacobian(ch: Character, groups: list[np.ndarray], Q, Qd, T, x) -> ca.
         d_y = ca.vertcat(ca.horzcat(-ca.repmat(Jp[0], n - 1, 1), ca.diagcat(*Jp[1:])),
                          ca.horzcat(-ca.repmat(Jh[0], n - 1, 1), ca.diagcat(*Jh[1:])))
         y = ca.vec(ca.vertcat(Q[:, idx], Qd[:, idx]))  # (q_j, q̇_j) point by point
-        dt = T[:, idx[1:]] - T[:, idx[0]]
-        grav = ca.vertcat(ca.vec(ca.vertcat(ca.DM.zeros(2, n - 1), M * G * dt)), ca.DM.zeros(3 * (n - 1), 1))
-        blocks.append(ca.mtimes(d_y, ca.jacobian(y, x)) + ca.jacobian(grav, x))
+        # ∂(t_j − t_0)/∂x of the vertical rows (a free warp moves the times), as an explicit
+        # difference matrix: the Jacobian of the broadcast ``T[:, idx[1:]] - T[:, idx[0]]`` came out
+        # wrong (tests/problem/test_flight.py)
+        diff = np.hstack([-np.ones((n - 1, 1)), np.eye(n - 1)])  # (n − 1, n)
+        dT = M * G * ca.mtimes(ca.DM(diff), ca.jacobian(ca.vec(T[:, idx]), x))  # (n − 1, nx)
+        pick = np.zeros((6 * (n - 1), n - 1))
+        pick[3 * np.arange(n - 1) + 2, np.arange(n - 1)] = 1.0  # the P_z row of each point
+        blocks.append(ca.mtimes(d_y, ca.jacobian(y, x)) + ca.mtimes(ca.sparsify(ca.DM(pick)), dT))
     return ca.vertcat(*blocks)
