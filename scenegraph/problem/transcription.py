@@ -72,7 +72,7 @@ from scenegraph.model.motion import basis
 from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
-from scenegraph.problem.flight import flight_constraints, flight_groups, flight_jacobian
+from scenegraph.problem.flight import flight_constraints, flight_groups, flight_hessian, flight_jacobian
 from scenegraph.problem.gram import dynamics_gauss_newton
 from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
@@ -644,6 +644,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             add("flight_momentum", fc, 0.0, 0.0)
             flight_rows = fc
             flight_jac = (lambda fgroups=fgroups, T_s=T_s: flight_jacobian(ch, fgroups, Q, Qd, T_s, x))
+            flight_hess = (lambda lam, fgroups=fgroups: flight_hessian(ch, fgroups, Q, Qd, lam, x))
     # footsteps: planted handles at their footprint on the ground
     if pins:
         s_pin = np.array([pn[1] for pn in pins])
@@ -804,6 +805,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         H = 2 * lam_f * (JtJ_dyn + ca.mtimes(J_x.T, J_x))
         if sp.hessian != "gauss_newton_objective":
             H = H + Hc
+            if frows and sp.flight_curvature:  # the flight rows' curvature (.flight)
+                H = H + flight_hess(lam_g[frows])
         if sp.hessian == "exact":
             # second-order term 2 Σ r ∇²r of Σ r² (times lam_f).  Dynamics: r = C ⊙ Q(z) per point with
             # z = (q, q̇, q̈, forces); with the timewarp held, C is constant and z linear in x, so the
