@@ -15,8 +15,12 @@ stalled early (172 vs 600 iterations) at a higher energy (4172 vs 3873) with its
 worse (penetration 12.5 vs 5.0 mm, stance slide 32 vs 10 mm).
 
 with P, H functions of the pose q and velocity q̇ only (:func:`momenta_fn`, plain CasADi SX
-algebra of the forward kinematics: exact first derivatives; their curvature is left out of
-the Gauss-Newton Lagrangian Hessian, docs/dynamic-motion.md).  This
+algebra of the forward kinematics: exact first derivatives).  The transcription keeps these rows
+MX and gives IPOPT their Jacobian by the chain rule (:func:`flight_jacobian`: the per-point
+momenta Jacobian, differentiated once, times ∂(q, q̇)/∂x); their curvature
+(:func:`flight_hessian`) is left out of the Lagrangian Hessian by default
+(``Subproblem.flight_curvature``: with it broad_jump took 212 iterations to E 1648 against
+237–300 to E 1136–1180, docs/dynamic-motion.md).  This
 replaces the stiff least-squares term (root residual weighted W_FLIGHT = 1e6 in flight,
 formulation (a)) whose ill-conditioning made IPOPT spend most of a jump's iterations on it;
 the root residual keeps its ordinary weight W_ROOT in flight (it still counts in the energy,

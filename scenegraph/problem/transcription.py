@@ -36,7 +36,8 @@ of motion must hold between the points too, not only at them:
 ``dense_dynamics=False`` gives the round-8 transcription (uniform points plus contact ends,
 forces only at the points, trapezoid weights), kept for comparison (tests/problem/
 test_dense_dynamics.py); the independent check is :mod:`scenegraph.model.dense_audit`.
-IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals) plus the exact Hessian of
+IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals; the dynamics' JᵀJ assembled
+point by point, :mod:`.gram`, when the timewarp is held) plus the exact Hessian of
 the kinematic constraints by default; ``Subproblem(hessian="exact")`` adds the residual
 curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`~scenegraph.model.residual.kernel_hessian`, chained
 through the splines; see README "Exact Hessian" for what it measured).  Style θ and all
