@@ -15,8 +15,12 @@ stalled early (172 vs 600 iterations) at a higher energy (4172 vs 3873) with its
 worse (penetration 12.5 vs 5.0 mm, stance slide 32 vs 10 mm).
 
 with P, H functions of the pose q and velocity q̇ only (:func:`momenta_fn`, plain CasADi SX
-algebra of the forward kinematics: exact first derivatives; their curvature is left out of
-the Gauss-Newton Lagrangian Hessian, docs/dynamic-motion.md).  This
+algebra of the forward kinematics: exact first derivatives).  The transcription keeps these rows
+MX and gives IPOPT their Jacobian by the chain rule (:func:`flight_jacobian`: the per-point
+momenta Jacobian, differentiated once, times ∂(q, q̇)/∂x); their curvature
+(:func:`flight_hessian`) is left out of the Lagrangian Hessian by default
+(``Subproblem.flight_curvature``: with it broad_jump took 212 iterations to E 1648 against
+237–300 to E 1136–1180, docs/dynamic-motion.md).  This
 replaces the stiff least-squares term (root residual weighted W_FLIGHT = 1e6 in flight,
 formulation (a)) whose ill-conditioning made IPOPT spend most of a jump's iterations on it;
 the root residual keeps its ordinary weight W_ROOT in flight (it still counts in the energy,
@@ -34,7 +38,8 @@ import numpy as np
 from scenegraph.model.body import G, N_DOF, Character
 from scenegraph.model.kinematics import body_transforms
 
-__all__ = ["momenta_fn", "flight_groups", "flight_constraints", "FLIGHT_MODES"]
+__all__ = ["momenta_fn", "momenta_jacobian_fn", "flight_groups", "flight_constraints", "flight_jacobian",
+           "momenta_hessian_fn", "flight_hessian", "FLIGHT_MODES"]
 
 FLIGHT_MODES = ("penalty", "momentum")  # Subproblem.flight_mode: W_FLIGHT least squares, or these equalities
 
@@ -61,6 +66,15 @@ def momenta_fn(ch: Character) -> ca.Function:
     vc = P / M
     H = sum(m * ca.cross(x - c, v - vc) + ca.mtimes(I, w) for m, x, v, I, w in zip(ms, xs, vs, Iws, ws))
     return ca.Function("momenta", [q, qd], [c, P, H], ["q", "qd"], ["c", "P", "H"])
+
+
+@functools.lru_cache(maxsize=16)
+def momenta_jacobian_fn(ch: Character) -> ca.Function:
+    """CasADi Function (q (35), q̇ (35)) → ∂(P, H)/∂(q, q̇) (6 × 70): the momenta's Jacobian at one
+    point, differentiated once symbolically (SX) and mapped over points by :func:`flight_jacobian`."""
+    q, qd = ca.SX.sym("q", N_DOF), ca.SX.sym("qd", N_DOF)
+    _, P, H = momenta_fn(ch)(q, qd)
+    return ca.Function("momenta_jac", [q, qd], [ca.jacobian(ca.vertcat(P, H), ca.vertcat(q, qd))], ["q", "qd"], ["J"])
 
 
 def flight_groups(flights, motion, s: np.ndarray) -> list[np.ndarray]:
@@ -91,3 +105,66 @@ def flight_constraints(ch: Character, groups: list[np.ndarray], Q, Qd, T) -> ca.
         rows.append(ca.vec(P[:, 1:] - ca.repmat(P[:, 0], 1, len(idx) - 1) + grav))
         rows.append(ca.vec(H[:, 1:] - ca.repmat(H[:, 0], 1, len(idx) - 1)))
     return ca.vertcat(*rows)
+
+
+def flight_jacobian(ch: Character, groups: list[np.ndarray], Q, Qd, T, x) -> ca.MX | None:
+    """∂/∂x of :func:`flight_constraints` (same rows), by the chain rule through the per-point
+    momenta Jacobian (:func:`momenta_jacobian_fn`, mapped) and ∂(q, q̇)/∂x: CasADi's MX Jacobian
+    of the rows took 1.1 s per evaluation on broad_jump (its SX expansion 38 s to build)."""
+    if not groups:
+        return None
+    jfn = momenta_jacobian_fn(ch)
+    M, blocks = ch.total_mass, []
+    for k in groups:
+        idx = [int(i) for i in k]
+        n = len(idx)
+        Jm = jfn.map(n)(Q[:, idx], Qd[:, idx])  # (6, 70 n): point j's columns 70 j … 70 j + 69
+        Jp = [Jm[0:3, 70 * j:70 * (j + 1)] for j in range(n)]
+        Jh = [Jm[3:6, 70 * j:70 * (j + 1)] for j in range(n)]
+        d_y = ca.vertcat(ca.horzcat(-ca.repmat(Jp[0], n - 1, 1), ca.diagcat(*Jp[1:])),
+                         ca.horzcat(-ca.repmat(Jh[0], n - 1, 1), ca.diagcat(*Jh[1:])))
+        y = ca.vec(ca.vertcat(Q[:, idx], Qd[:, idx]))  # (q_j, q̇_j) point by point
+        # ∂(t_j − t_0)/∂x of the vertical rows (a free warp moves the times), as an explicit
+        # difference matrix: the Jacobian of the broadcast ``T[:, idx[1:]] - T[:, idx[0]]`` came out
+        # wrong (tests/problem/test_flight.py)
+        diff = np.hstack([-np.ones((n - 1, 1)), np.eye(n - 1)])  # (n − 1, n)
+        dT = M * G * ca.mtimes(ca.DM(diff), ca.jacobian(ca.vec(T[:, idx]), x))  # (n − 1, nx)
+        pick = np.zeros((6 * (n - 1), n - 1))
+        pick[3 * np.arange(n - 1) + 2, np.arange(n - 1)] = 1.0  # the P_z row of each point
+        blocks.append(ca.mtimes(d_y, ca.jacobian(y, x)) + ca.mtimes(ca.sparsify(ca.DM(pick)), dT))
+    return ca.vertcat(*blocks)
+
+
+@functools.lru_cache(maxsize=16)
+def momenta_hessian_fn(ch: Character) -> ca.Function:
+    """CasADi Function (q (35), q̇ (35), w (6)) → ∇²_(q, q̇) (w · (P, H)) (70 × 70): the curvature of
+    a weighted sum of one point's momenta (SX, built once in ~0.6 s, ~3 ms per point evaluated)."""
+    q, qd, w = ca.SX.sym("q", N_DOF), ca.SX.sym("qd", N_DOF), ca.SX.sym("w", 6)
+    _, P, H = momenta_fn(ch)(q, qd)
+    Hs = ca.hessian(ca.dot(w, ca.vertcat(P, H)), ca.vertcat(q, qd))[0]
+    return ca.Function("momenta_hess", [q, qd, w], [Hs], ["q", "qd", "w"], ["H"])
+
+
+def flight_hessian(ch: Character, groups: list[np.ndarray], Q, Qd, lam, x) -> ca.MX | None:
+    """Σ_i λ_i ∇²_x row_i of :func:`flight_constraints` (nx × nx), ``lam`` the rows' multipliers
+    (MX, in the rows' order): per point the momenta's curvature weighted by its rows' multipliers
+    (the first point of a flight by minus their sum), chained through ∂(q, q̇)/∂x.  Exact when
+    (q, q̇) are linear in x (the timewarp held); with a free warp the curvature of q̇ = q′/T′ is
+    left out.  The gravity term is linear in the times: no curvature."""
+    if not groups:
+        return None
+    hfn = momenta_hessian_fn(ch)
+    out, r0 = 0, 0
+    for k in groups:
+        idx = [int(i) for i in k]
+        n = len(idx)
+        lp = ca.reshape(lam[r0:r0 + 3 * (n - 1)], 3, n - 1)  # P rows, point by point
+        lh = ca.reshape(lam[r0 + 3 * (n - 1):r0 + 6 * (n - 1)], 3, n - 1)
+        r0 += 6 * (n - 1)
+        W = ca.vertcat(lp, lh)  # (6, n − 1)
+        W = ca.horzcat(-ca.sum2(W), W)  # the flight's first point: minus the others'
+        Hk = hfn.map(n)(Q[:, idx], Qd[:, idx], W)  # (70, 70 n)
+        Hyy = ca.diagcat(*ca.horzsplit(Hk, 70)) if n > 1 else Hk
+        Jy = ca.jacobian(ca.vec(ca.vertcat(Q[:, idx], Qd[:, idx])), x)
+        out = out + ca.mtimes(Jy.T, ca.mtimes(Hyy, Jy))
+    return out

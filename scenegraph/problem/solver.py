@@ -2,7 +2,8 @@
 
 :func:`solver_options` builds the CasADi ``nlpsol`` options of a :class:`~.subproblem.Subproblem`
 (``max_iter``, ``tol``, the project's IPOPT defaults, then ``ipopt_options`` and
-``nlpsol_options``; the environment variable ``COMPOSE_IPOPT_PRINT`` sets IPOPT's print level).
+``nlpsol_options``; the environment variable ``COMPOSE_IPOPT_PRINT`` sets IPOPT's print level,
+``COMPOSE_IPOPT_TIMING=1`` adds IPOPT's timing statistics).
 :func:`make_solver` creates the IPOPT solver of an :class:`~.transcription.NLP` (with a
 :class:`StallMonitor` when ``stall_iterations`` > 0) and returns a :class:`Built`;
 :func:`solve` transcribes (unless given a :class:`Built`), solves and reads the
@@ -122,6 +123,8 @@ def solver_options(sp: Subproblem, *, max_iter: int | None = None, tol: float | 
                   "acceptable_tol": 1e-4, "acceptable_iter": 5, "mu_strategy": "adaptive",
                   "linear_solver": "mumps", "sb": "yes"},
     }
+    if _os.environ.get("COMPOSE_IPOPT_TIMING"):  # profiling: IPOPT's timing statistics at the end
+        opts["ipopt"]["print_timing_statistics"] = "yes"
     opts["ipopt"].update(dict(sp.ipopt_options))
     opts.update(dict(sp.nlpsol_options))
     return opts

@@ -95,6 +95,8 @@ class Subproblem:
     flights: tuple[tuple[float, float], ...] = ()  # world s (take-off, landing): zero root residual inside
     flight_mode: str = "momentum"  # "momentum": ballistic momentum equalities at the flight's points
     # (scenegraph/problem/flight.py); "penalty": the root residual weighted W_FLIGHT in flight (round 8)
+    flight_curvature: bool = False  # True: the momentum rows' curvature in the Lagrangian Hessian (flight.flight_hessian;
+    # broad_jump A/B 2026-12-03: 212 it, E 1648 against 237–300 it, E 1136–1180 without); False: Gauss–Newton in them
     window: tuple[float, float] | None = None
     free: frozenset = frozenset({"q", "warp"})
     dynamics: str = "full"

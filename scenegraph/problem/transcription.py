@@ -36,7 +36,8 @@ of motion must hold between the points too, not only at them:
 ``dense_dynamics=False`` gives the round-8 transcription (uniform points plus contact ends,
 forces only at the points, trapezoid weights), kept for comparison (tests/problem/
 test_dense_dynamics.py); the independent check is :mod:`scenegraph.model.dense_audit`.
-IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals) plus the exact Hessian of
+IPOPT gets a **Gauss–Newton Hessian** (2 JᵀJ of the residuals; the dynamics' JᵀJ assembled
+point by point, :mod:`.gram`, when the timewarp is held) plus the exact Hessian of
 the kinematic constraints by default; ``Subproblem(hessian="exact")`` adds the residual
 curvature 2 Σ r ∇²r (a compiled per-point kernel Hessian, :func:`~scenegraph.model.residual.kernel_hessian`, chained
 through the splines; see README "Exact Hessian" for what it measured).  Style θ and all
@@ -72,7 +73,8 @@ from scenegraph.model.motion import basis
 from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
-from scenegraph.problem.flight import flight_constraints, flight_groups
+from scenegraph.problem.flight import flight_constraints, flight_groups, flight_hessian, flight_jacobian
+from scenegraph.problem.gram import dynamics_gauss_newton
 from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
@@ -638,10 +640,14 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         # at every evaluation point in flight, nodes and midpoints: stated at the nodes alone, a run's
         # flights wiggled between them (0.05 body weight at 120 Hz, tackle, docs/results.md)
         dep = _depend_on_free(K, s_ev, mask, warp_free)  # a window: only points its free control points move
-        fc = flight_constraints(ch, [k[dep[k]] for k in flight_groups(sp.flights, m, s_ev) if dep[k].sum() >= 2],
-                                Q, Qd, ca.mtimes(_sparse(basis(nW, s_ev, 0)), warp).T)
+        fgroups = [k[dep[k]] for k in flight_groups(sp.flights, m, s_ev) if dep[k].sum() >= 2]
+        T_s = ca.mtimes(_sparse(basis(nW, s_ev, 0)), warp).T
+        fc = flight_constraints(ch, fgroups, Q, Qd, T_s)
         if fc is not None:
             add("flight_momentum", fc, 0.0, 0.0)
+            flight_rows = fc
+            flight_jac = (lambda fgroups=fgroups, T_s=T_s: flight_jacobian(ch, fgroups, Q, Qd, T_s, x))
+            flight_hess = (lambda lam, fgroups=fgroups: flight_hessian(ch, fgroups, Q, Qd, lam, x))
     # footsteps: planted handles at their footprint on the ground
     if pins:
         s_pin = np.array([pn[1] for pn in pins])
@@ -774,23 +780,36 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         # parts makes their derivatives cheap scalar code instead of MX graph evaluation.
         # (expand the plain functions first, then differentiate in SX: much cheaper to build)
         xs, ps = ca.SX.sym("x", x.shape[0]), ca.SX.sym("p", p.shape[0])
-        J_dyn = ca.jacobian(rho_dyn, x)
+        if sp.dynamics != "kinematic" and not warp_free:  # the same JᵀJ, point by point (.gram)
+            D = scale * ca.vertcat(SA_ev, ca.repmat(ca.DM(np.sqrt(w_root)).T, N_ROOT, 1)) * ca.repmat(wt, N_DOF, 1)
+            JtJ_dyn = dynamics_gauss_newton(ch, ca.vertcat(Q, Qd, Qdd, Fc), TH_k, D, x)
+        else:
+            J_dyn = ca.jacobian(rho_dyn, x)
+            JtJ_dyn = ca.mtimes(J_dyn.T, J_dyn)
         rxs = ca.Function("rho_extra", [x, p], [rho_x]).expand()(xs, ps)
         J_x = ca.Function("J_extra", [xs, ps], [ca.jacobian(rxs, xs)])(x, p)
-        gs = ca.Function("g_all", [x, p], [gg]).expand()(xs, ps)
-        if gg.shape[0]:
-            lam_s = ca.SX.sym("lam_s", gg.shape[0])
-            curved = np.ones(gg.shape[0])  # the flight momentum rows: no curvature (Gauss–Newton in them, .flight)
-            for name, sl, _ in groups:
-                if name == "flight_momentum":
-                    curved[sl] = 0.0
-            Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s * ca.DM(curved), gs), xs)[0]])(
-                x, p, lam_g)
+        # The flight momentum rows (.flight) stay MX, out of the SX expansion: expanded, the momenta's
+        # forward kinematics at every flight point made the SX Jacobian of g 38 s of broad_jump's 75 s
+        # build; CasADi differentiates the (SX) momenta function once and maps it instead.  They get
+        # no curvature in the Hessian (Gauss–Newton in them, as before).
+        is_fl = np.zeros(gg.shape[0], bool)
+        for name, sl, _ in groups:
+            if name == "flight_momentum":
+                is_fl[sl] = True
+        rest, frows = np.flatnonzero(~is_fl).tolist(), np.flatnonzero(is_fl).tolist()
+        g_rest = gg[rest] if frows else gg
+        gs = ca.Function("g_all", [x, p], [g_rest]).expand()(xs, ps)
+        if gs.shape[0]:
+            lam_s = ca.SX.sym("lam_s", gs.shape[0])
+            Hc = ca.Function("H_con", [xs, ps, lam_s], [ca.hessian(ca.dot(lam_s, gs), xs)[0]])(
+                x, p, lam_g[rest] if frows else lam_g)
         else:
             Hc = ca.MX(x.shape[0], x.shape[0])
-        H = 2 * lam_f * (ca.mtimes(J_dyn.T, J_dyn) + ca.mtimes(J_x.T, J_x))
+        H = 2 * lam_f * (JtJ_dyn + ca.mtimes(J_x.T, J_x))
         if sp.hessian != "gauss_newton_objective":
             H = H + Hc
+            if frows and sp.flight_curvature:  # the flight rows' curvature (.flight)
+                H = H + flight_hess(lam_g[frows])
         if sp.hessian == "exact":
             # second-order term 2 Σ r ∇²r of Σ r² (times lam_f).  Dynamics: r = C ⊙ Q(z) per point with
             # z = (q, q̇, q̈, forces); with the timewarp held, C is constant and z linear in x, so the
@@ -812,7 +831,14 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         H = ca.triu(H)
         hess = ca.Function("nlp_hess_l", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
 
-        jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
+        if frows:  # the SX rows and the MX flight rows, put back in g's order
+            g_r, J_r = ca.Function("jac_g_rest", [xs, ps], [gs, ca.jacobian(gs, xs)])(x, p)
+            back = ca.DM(ca.Sparsity.triplet(gg.shape[0], gg.shape[0], rest + frows, list(range(gg.shape[0]))), 1.0)
+            jac_g = ca.Function("nlp_jac_g", [x, p], [ca.mtimes(back, ca.vertcat(g_r, flight_rows)),
+                                                      ca.mtimes(back, ca.vertcat(J_r, flight_jac()))],
+                                ["x", "p"], ["g", "jac_g_x"])
+        else:
+            jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
     th = theta_kernel_vector(sp.style)
     sa = np.sqrt(np.asarray(sp.style.alpha, float))
     if sp.style_end is not None:

@@ -93,3 +93,45 @@ def test_rows_for_a_heavy_and_a_light_character():
         qd = np.zeros_like(q)
         qd[:, :3] = v0 - np.outer(t, [0.0, 0.0, G])
         assert np.abs(_rows(ch, q, qd, t)).max() < 1e-9
+
+
+def test_the_chain_rule_jacobian_equals_casadis_ad_jacobian_with_a_free_warp():
+    """flight_jacobian (per-point momenta Jacobian × ∂(q, q̇)/∂x, plus the gravity term's time
+    derivative) against CasADi's AD Jacobian of the same rows, on a random B-spline-like linear
+    map from x to poses and velocities and a free time map (the warp)."""
+    from scenegraph.problem.flight import flight_jacobian
+    ch = default_character()
+    rng = np.random.default_rng(5)
+    n, nx = 7, 40
+    x = ca.MX.sym("x", nx)
+    A, B = rng.standard_normal((N_DOF * n, nx)) * 0.05, rng.standard_normal((N_DOF * n, nx)) * 0.3
+    Q = ca.reshape(ca.DM(np.tile(standing_pose(ch), n)) + ca.mtimes(ca.DM(A), x), N_DOF, n)
+    Qd = ca.reshape(ca.mtimes(ca.DM(B), x), N_DOF, n)
+    T = ca.reshape(ca.DM(np.linspace(0.0, 0.3, n)) + 0.01 * ca.mtimes(ca.DM(rng.standard_normal((n, nx))), x), 1, n)
+    groups = [np.arange(0, 4), np.arange(3, 7)]
+    rows = flight_constraints(ch, groups, Q, Qd, T)
+    f = ca.Function("f", [x], [flight_jacobian(ch, groups, Q, Qd, T, x), ca.jacobian(rows, x)])
+    J, J_ad = (np.array(ca.densify(v)) for v in f(rng.standard_normal(nx)))
+    np.testing.assert_allclose(J, J_ad, rtol=0, atol=1e-9 * np.abs(J_ad).max())
+    assert np.abs(J_ad).max() > 1.0
+
+
+def test_the_rows_curvature_equals_casadis_ad_hessian():
+    """flight_hessian (per-point momenta curvature, weighted by the rows' multipliers) against
+    CasADi's AD Hessian of λ · rows, (q, q̇) linear in x and the times moving with x."""
+    from scenegraph.problem.flight import flight_hessian
+    ch = default_character()
+    rng = np.random.default_rng(7)
+    n, nx = 7, 30
+    x = ca.MX.sym("x", nx)
+    A, B = rng.standard_normal((N_DOF * n, nx)) * 0.05, rng.standard_normal((N_DOF * n, nx)) * 0.3
+    Q = ca.reshape(ca.DM(np.tile(standing_pose(ch), n)) + ca.mtimes(ca.DM(A), x), N_DOF, n)
+    Qd = ca.reshape(ca.mtimes(ca.DM(B), x), N_DOF, n)
+    T = ca.reshape(ca.DM(np.linspace(0.0, 0.3, n)) + 0.01 * ca.mtimes(ca.DM(rng.standard_normal((n, nx))), x), 1, n)
+    groups = [np.arange(0, 4), np.arange(3, 7)]
+    rows = flight_constraints(ch, groups, Q, Qd, T)
+    lam = ca.MX.sym("lam", rows.shape[0])
+    f = ca.Function("f", [x, lam], [flight_hessian(ch, groups, Q, Qd, lam, x), ca.hessian(ca.dot(lam, rows), x)[0]])
+    H, H_ad = (np.array(ca.densify(v)) for v in f(rng.standard_normal(nx), rng.standard_normal(rows.shape[0])))
+    assert np.abs(H_ad).max() > 1.0
+    np.testing.assert_allclose(H, H_ad, rtol=0, atol=1e-9 * np.abs(H_ad).max())
