@@ -39,3 +39,18 @@ def test_clearance_pairs_find_close_bodies_and_skip_asked_for_contacts():
     far = qb.copy()
     far[0, 1] = 3.0
     assert clearance_pairs(CH, qa, CH, far, [0.0]) == ()
+
+
+def test_flat_solids_get_thin_grid_spheres():
+    """A hand (2.4 cm thick, 9.5 cm wide) is covered by spheres about as thick as it is, not as
+    wide: slab spheres of 4.8 cm reached past the wrist of a hand it holds."""
+    from scenegraph.model.clearance import FLAT_ASPECT
+    sp = body_spheres(CH)
+    flat = []
+    for b, shape in zip(CH.bodies, drawn_shapes(CH)):
+        P = _samples(shape)
+        ext = np.sort(P.max(0) - P.min(0))
+        if ext[1] >= FLAT_ASPECT * ext[0]:
+            flat.append(b.name)
+            assert max(s.radius for s in sp if s.body == b.name) <= 1.4 * ext[0] / 2, b.name
+    assert {"hand_l", "hand_r", "pelvis"} <= set(flat) and "thorax" not in flat
