@@ -331,23 +331,29 @@ def _node_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     return np.array(out)
 
 
-def _dense_points(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _dense_points(s: np.ndarray, panels: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(evaluation points, their quadrature weights, interpolation matrix M (N, N_e)) of the
-    dense residual: the N nodes ``s`` first, then the midpoint of every node interval; weights
-    of Simpson's rule (h/6 at each end of an interval, 2h/3 at its midpoint), so Σ w Q² is the
-    integral of Q² for a quadratic Q; column j of M gives the piecewise-linear interpolant of
-    node values at evaluation point j (1 at a node, ½ ½ at a midpoint)."""
+    dense residual: the N nodes ``s`` first, then the 2·panels − 1 inner points of every node
+    interval (its midpoint for one panel; also the quarter points for two), interval by
+    interval; weights of composite Simpson's rule over ``panels`` equal panels per interval
+    (h/6 at each end of a one-panel interval, 2h/3 at its midpoint), so Σ w Q² is the integral
+    of Q² for a Q quadratic on each panel; column j of M gives the piecewise-linear interpolant
+    of node values at evaluation point j (1 at a node, ½ ½ at a midpoint)."""
     N = len(s)
     h = np.diff(s)
-    s_ev = np.r_[s, 0.5 * (s[:-1] + s[1:])]
+    n_in = 2 * panels - 1
+    frac = np.arange(1, n_in + 1) / (2 * panels)  # inner points as fractions of an interval
+    simpson = np.where(np.arange(1, n_in + 1) % 2 == 1, 4.0, 2.0) / (6 * panels)  # × h
+    s_ev = np.r_[s, (s[:-1, None] + h[:, None] * frac[None, :]).ravel()]
     w = np.zeros(len(s_ev))
-    w[:N - 1] += h / 6
-    w[1:N] += h / 6
-    w[N:] = 2 * h / 3
+    w[:N - 1] += h / (6 * panels)
+    w[1:N] += h / (6 * panels)
+    w[N:] = (h[:, None] * simpson[None, :]).ravel()
     M = np.zeros((N, len(s_ev)))
     M[np.arange(N), np.arange(N)] = 1.0
-    M[np.arange(N - 1), N + np.arange(N - 1)] = 0.5
-    M[np.arange(1, N), N + np.arange(N - 1)] = 0.5
+    cols = N + np.arange((N - 1) * n_in).reshape(N - 1, n_in)
+    M[np.arange(N - 1)[:, None], cols] = 1.0 - frac[None, :]
+    M[np.arange(1, N)[:, None], cols] = frac[None, :]
     return s_ev, w, M
 
 
@@ -442,7 +448,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             s, wq = s[live], wq[live]
     N = len(s)
     if dense and N > 1:  # the dynamics at the nodes and between them (module docstring)
-        s_ev, wq, Mev = _dense_points(s)
+        s_ev, wq, Mev = _dense_points(s, sp.eval_panels)
     else:
         s_ev, Mev = s, np.eye(N)
     Ne = len(s_ev)
