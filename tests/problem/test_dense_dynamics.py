@@ -46,13 +46,13 @@ def test_two_panels_add_the_quarter_points_and_integrate_piecewise_quadratics():
     s_ev, w, M = _dense_points(s, 2)
     assert len(s_ev) == len(s) + 3 * (len(s) - 1)
     np.testing.assert_allclose(s_ev[len(s):len(s) + 3], [0.025, 0.05, 0.075])
-    # quadratic on each half interval, kinked at the midpoints: exact with two panels, not with one
-    def kink(x):  # (x − m)² − (h/2)² left of each interval's midpoint m, 3 × that right of it
+    # linear on each half interval, kinked at the midpoints: exact with two panels, not with one
+    def kink(x):  # |x − m| − h/2 on each interval (midpoint m, length h): 0 at the nodes, kinked at m
         x = np.asarray(x, float)
         k = np.clip(np.searchsorted(s, x, side="right") - 1, 0, len(s) - 2)
         m, h = 0.5 * (s[k] + s[k + 1]), s[k + 1] - s[k]
-        return np.where(x < m, 1.0, 3.0) * ((x - m) ** 2 - (0.5 * h) ** 2)
-    exact = sum(-(1.0 + 3.0) * 2.0 / 3.0 * (0.5 * h) ** 3 for h in np.diff(s))
+        return np.abs(x - m) - 0.5 * h
+    exact = sum(-0.25 * h ** 2 for h in np.diff(s))
     assert np.dot(w, kink(s_ev)) == pytest.approx(exact, rel=1e-6)
     s1, w1, _ = _dense_points(s)
     assert abs(np.dot(w1, kink(s1)) - exact) > 1e-3 * exact
