@@ -24,6 +24,15 @@ with c_j(t) fixed (world m).  Pairs between bodies whose contact a goal asks for
 are left out.  Pairs farther apart than ``margin`` in the current motions are not
 constrained: a step moves a body by less than that near another (the stage audit checks
 the result).  Frames: body frames as in ``body.py``; world Z up; m, s.
+
+Between the constraint times.  The rows hold at sample times only (``CLEARANCE_HZ``); two
+bodies that move relative to each other can meet between two samples.  Each row's radius
+therefore carries a sweep pad: half the largest displacement of c_i − c_j over the sample
+interval before or after its time, in the current motions — a pair approaching at a constant
+relative velocity cannot close more than that between two samples that both keep it apart by
+the pad (a held hand and the partner's forearm move together: pad ≈ 0; a swinging arm past
+the partner's at 2 m/s relative: 1.7 cm at 60 Hz).  Without it, in ``handhold`` at 30 Hz, the
+adult's forearm passed 1.8 cm into the child's between two samples (stage audit, one frame).
 """
 from __future__ import annotations
 
@@ -37,7 +46,7 @@ import numpy as np
 from scenegraph.model.body import N_DOF, Character, drawn_shapes, keel_points
 from scenegraph.model.kinematics import frame_transforms, numeric_fk
 
-__all__ = ["Sphere", "BodyClearance", "body_spheres", "sphere_centers", "clearance_pairs", "sphere_centers_fn",
+__all__ = ["Sphere", "BodyClearance", "body_spheres", "sphere_centers", "clearance_pairs", "sweep_pad", "sphere_centers_fn",
            "SPHERE_PAD", "FLAT_ASPECT", "FLAT_CELL", "CLEARANCE_MARGIN", "CLEARANCE_WEIGHT", "CLEARANCE_HZ"]
 
 SPHERE_PAD = 0.001  # m added to each sphere's radius (sampling)
@@ -46,7 +55,7 @@ CLEARANCE_WEIGHT = 1e6  # total least-squares weight of the rows (Subproblem.cle
 # rows (5144 of them in handhold's adult/c1 full step, starting up to 12 cm inside) IPOPT ended that
 # step at its 100-iteration cap at E 40 497; as this one-sided term it converged (95 iterations,
 # E 443 against 408 without clearance) with every row met at its time; weight 1e4 left 4.4 mm
-CLEARANCE_HZ = 30.0  # clearance constraint times per second (the constraint grid's rate)
+CLEARANCE_HZ = 60.0  # clearance constraint times per second (each row padded by its sweep between samples)
 SLAB = 0.6  # slab length / cross-section radius: each sphere is at most ~4 % wider than its slab's section
 FLAT_ASPECT = 1.8  # middle / smallest extent from which a solid is covered by a grid of cells (hands, pelvis)
 FLAT_CELL = 1.5  # grid cell side / half-thickness: an adult hand 18 spheres of ≤ 3.1 cm (1.0: 32 of ≤ 3.0 cm)
@@ -158,10 +167,25 @@ def clearance_pairs(ch_a: Character, q_a: np.ndarray, ch_b: Character, q_b: np.n
     rb = np.array([s.radius for s in sb])
     allowed = np.array([[(x.body, y.body) not in skip for y in sb] for x in sa])
     out = []
-    for k, t in enumerate(np.atleast_1d(np.asarray(times, float))):
+    ts = np.atleast_1d(np.asarray(times, float))
+    for k, t in enumerate(ts):
         d = np.linalg.norm(ca_[k][:, None, :] - cb_[k][None, :, :], axis=-1)
         gap = d - ra[:, None] - rb[None, :]
-        for i, j in zip(*np.nonzero((gap < margin) & allowed)):
-            out.append(BodyClearance(int(i), float(t), tuple(float(x) for x in cb_[k][j]), float(ra[i] + rb[j]),
+        ii, jj = np.nonzero((gap < margin) & allowed)
+        pad = sweep_pad(ca_, cb_, k, ii, jj)
+        for i, j, p in zip(ii, jj, pad):
+            out.append(BodyClearance(int(i), float(t), tuple(float(x) for x in cb_[k][j]), float(ra[i] + rb[j] + p),
                                      f"{other}/{sb[j].body}", int(j)))
     return tuple(out)
+
+
+def sweep_pad(ca_: np.ndarray, cb_: np.ndarray, k: int, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
+    """Sweep pad (m) of the sphere pairs (ii[n] of a, jj[n] of b) at sample k of the (T, n, 3)
+    world centres ``ca_``, ``cb_``: half the largest change of c_i − c_j from sample k to its
+    neighbours (0 with a single sample); see the module docstring."""
+    rel = ca_[k][ii] - cb_[k][jj]
+    pad = np.zeros(len(ii))
+    for n in (k - 1, k + 1):
+        if 0 <= n < ca_.shape[0]:
+            pad = np.maximum(pad, 0.5 * np.linalg.norm(ca_[n][ii] - cb_[n][jj] - rel, axis=1))
+    return pad

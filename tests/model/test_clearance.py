@@ -54,3 +54,23 @@ def test_flat_solids_get_thin_grid_spheres():
             flat.append(b.name)
             assert max(s.radius for s in sp if s.body == b.name) <= 1.5 * ext[0] / 2, b.name  # hands 1.31, pelvis 1.21, toes keel 1.45
     assert {"hand_l", "hand_r", "pelvis"} <= set(flat) and "thorax" not in flat
+
+
+def test_rows_are_padded_by_the_relative_sweep_between_samples():
+    """Two characters side by side, b sliding past a along x at 2 m/s, sampled at 60 Hz: every
+    row's radius is the summed radii plus half the relative displacement per sample (1/60 m);
+    held still, no pad."""
+    T = 4
+    qa = np.zeros((T, 35))
+    qa[:, 2] = 1.0
+    qb = qa.copy()
+    qb[:, 1] = 0.3
+    dt = 1.0 / 60
+    times = np.arange(T) * dt
+    sp = body_spheres(CH)
+    still = clearance_pairs(CH, qa, CH, qb, times, other="b")
+    assert still and all(abs(c.radius - sp[c.sphere].radius - sp[c.other_sphere].radius) < 1e-12 for c in still)
+    qb[:, 0] = 2.0 * times
+    moving = clearance_pairs(CH, qa, CH, qb, times, other="b")
+    pads = [c.radius - sp[c.sphere].radius - sp[c.other_sphere].radius for c in moving]
+    assert moving and np.allclose(pads, 0.5 * 2.0 * dt)
