@@ -209,6 +209,35 @@ def flight_root_weights(sp: Subproblem, s: np.ndarray, w_r: float) -> np.ndarray
     return w
 
 
+def airborne_gaps(sp: Subproblem, ch: Character) -> list[tuple[float, float]]:
+    """World intervals (s) inside the motion where no handle of ``sp.footsteps`` is planted."""
+    m = sp.motion
+    iv = sorted((ta, tb) for st in sp.footsteps for _, (ta, tb), _ in contact_points(ch, st, None, sp.ground))
+    gaps, t = [], m.start
+    for ta, tb in iv:
+        if ta > t + 1e-9:
+            gaps.append((t, ta))
+        t = max(t, tb)
+    if t < m.end - 1e-9:
+        gaps.append((t, m.end))
+    return gaps
+
+
+def airborne_end_factor(sp: Subproblem, ch: Character, t: np.ndarray) -> np.ndarray:
+    """Root residual weight factor at world times ``t`` (``Subproblem.end_weight_ramp``): 1 + (r / d)²,
+    r the ramp (s), d ≥ r/10 the time to the nearest end of an airborne gap inside the motion.  Next
+    to such an end the whole ground force is small, so the centre of pressure a stage shows is the
+    residual moment divided by it: the residual must shrink as the force does."""
+    r = float(sp.end_weight_ramp)
+    m = sp.motion
+    ends = np.array([e for g in airborne_gaps(sp, ch) for e in g if m.start + 1e-9 < e < m.end - 1e-9])
+    t = np.asarray(t, float)
+    if not len(ends):
+        return np.ones(len(t))
+    d = np.maximum(np.min(np.abs(t[:, None] - ends[None, :]), axis=1), r / 10)
+    return 1.0 + (r / d) ** 2
+
+
 def flight_points(sp: Subproblem, s: np.ndarray) -> np.ndarray:
     """Which canonical collocation times ``s`` lie in a flight of ``sp.flights``, its ends
     included: at the take-off and touch-down points the contact force is held at zero as well
@@ -583,6 +612,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     QQ = kern(Q, Qd, Qdd, Fc, TH_k)  # (35, Ne)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
     w_root = flight_root_weights(sp, s_ev, w_r)  # (Ne,): W_FLIGHT at evaluation points in flight
+    if sp.end_weight_ramp > 0:
+        w_root = w_root * airborne_end_factor(sp, ch, t_ev)
     scale = OBJ_SCALE / mg  # residuals in units of body weight, objective O(1–100)
     wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
     rho_m = SA_ev * QQ[:N_JOINT, :]
