@@ -108,11 +108,6 @@ class Subproblem:
     dense_dynamics: bool = True  # nodes on the spline's knots and every contact/flight end, contact forces
     # piecewise linear between nodes and zero at touch-down and lift-off, the residual also at every
     # node interval's midpoint (Simpson); False: the round-8 grid (forces at points only), for comparison
-    eval_panels: int = 1  # Simpson panels per node interval (dense): 1 = node, midpoint, node; 2 adds the
-    # quarter points (transcription._dense_points)
-    end_weight_ramp: float = 0.0  # s (0: off): root residual weight × (1 + (ramp / d)²), d ≥ ramp / 10 the time
-    # to the nearest airborne gap's end (a touch-down after, a lift-off before no foot is planted), where the
-    # ground force is near zero and the stage's centre of pressure is residual moment / force
     shoe_gate: bool = True  # the heel shoe springs only in planned heel contact, ramped (scenegraph/model/shoe.py);
     # False: everywhere a heel is within ~5 mm of the floor (the round-8 kernel's)
     ground_hz: float = 0.0  # extra grid for non-penetration (0: the constraint grid; denser grids

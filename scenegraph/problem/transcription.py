@@ -209,35 +209,6 @@ def flight_root_weights(sp: Subproblem, s: np.ndarray, w_r: float) -> np.ndarray
     return w
 
 
-def airborne_gaps(sp: Subproblem, ch: Character) -> list[tuple[float, float]]:
-    """World intervals (s) inside the motion where no handle of ``sp.footsteps`` is planted."""
-    m = sp.motion
-    iv = sorted((ta, tb) for st in sp.footsteps for _, (ta, tb), _ in contact_points(ch, st, None, sp.ground))
-    gaps, t = [], m.start
-    for ta, tb in iv:
-        if ta > t + 1e-9:
-            gaps.append((t, ta))
-        t = max(t, tb)
-    if t < m.end - 1e-9:
-        gaps.append((t, m.end))
-    return gaps
-
-
-def airborne_end_factor(sp: Subproblem, ch: Character, t: np.ndarray) -> np.ndarray:
-    """Root residual weight factor at world times ``t`` (``Subproblem.end_weight_ramp``): 1 + (r / d)²,
-    r the ramp (s), d ≥ r/10 the time to the nearest end of an airborne gap inside the motion.  Next
-    to such an end the whole ground force is small, so the centre of pressure a stage shows is the
-    residual moment divided by it: the residual must shrink as the force does."""
-    r = float(sp.end_weight_ramp)
-    m = sp.motion
-    ends = np.array([e for g in airborne_gaps(sp, ch) for e in g if m.start + 1e-9 < e < m.end - 1e-9])
-    t = np.asarray(t, float)
-    if not len(ends):
-        return np.ones(len(t))
-    d = np.maximum(np.min(np.abs(t[:, None] - ends[None, :]), axis=1), r / 10)
-    return 1.0 + (r / d) ** 2
-
-
 def flight_points(sp: Subproblem, s: np.ndarray) -> np.ndarray:
     """Which canonical collocation times ``s`` lie in a flight of ``sp.flights``, its ends
     included: at the take-off and touch-down points the contact force is held at zero as well
@@ -360,29 +331,23 @@ def _node_grid(sp: Subproblem, ch: Character, hz: float) -> np.ndarray:
     return np.array(out)
 
 
-def _dense_points(s: np.ndarray, panels: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _dense_points(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(evaluation points, their quadrature weights, interpolation matrix M (N, N_e)) of the
-    dense residual: the N nodes ``s`` first, then the 2·panels − 1 inner points of every node
-    interval (its midpoint for one panel; also the quarter points for two), interval by
-    interval; weights of composite Simpson's rule over ``panels`` equal panels per interval
-    (h/6 at each end of a one-panel interval, 2h/3 at its midpoint), so Σ w Q² is the integral
-    of Q² for a Q quadratic on each panel; column j of M gives the piecewise-linear interpolant
-    of node values at evaluation point j (1 at a node, ½ ½ at a midpoint)."""
+    dense residual: the N nodes ``s`` first, then the midpoint of every node interval; weights
+    of Simpson's rule (h/6 at each end of an interval, 2h/3 at its midpoint), so Σ w Q² is the
+    integral of Q² for a quadratic Q; column j of M gives the piecewise-linear interpolant of
+    node values at evaluation point j (1 at a node, ½ ½ at a midpoint)."""
     N = len(s)
     h = np.diff(s)
-    n_in = 2 * panels - 1
-    frac = np.arange(1, n_in + 1) / (2 * panels)  # inner points as fractions of an interval
-    simpson = np.where(np.arange(1, n_in + 1) % 2 == 1, 4.0, 2.0) / (6 * panels)  # × h
-    s_ev = np.r_[s, (s[:-1, None] + h[:, None] * frac[None, :]).ravel()]
+    s_ev = np.r_[s, 0.5 * (s[:-1] + s[1:])]
     w = np.zeros(len(s_ev))
-    w[:N - 1] += h / (6 * panels)
-    w[1:N] += h / (6 * panels)
-    w[N:] = (h[:, None] * simpson[None, :]).ravel()
+    w[:N - 1] += h / 6
+    w[1:N] += h / 6
+    w[N:] = 2 * h / 3
     M = np.zeros((N, len(s_ev)))
     M[np.arange(N), np.arange(N)] = 1.0
-    cols = N + np.arange((N - 1) * n_in).reshape(N - 1, n_in)
-    M[np.arange(N - 1)[:, None], cols] = 1.0 - frac[None, :]
-    M[np.arange(1, N)[:, None], cols] = frac[None, :]
+    M[np.arange(N - 1), N + np.arange(N - 1)] = 0.5
+    M[np.arange(1, N), N + np.arange(N - 1)] = 0.5
     return s_ev, w, M
 
 
@@ -477,7 +442,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             s, wq = s[live], wq[live]
     N = len(s)
     if dense and N > 1:  # the dynamics at the nodes and between them (module docstring)
-        s_ev, wq, Mev = _dense_points(s, sp.eval_panels)
+        s_ev, wq, Mev = _dense_points(s)
     else:
         s_ev, Mev = s, np.eye(N)
     Ne = len(s_ev)
@@ -612,8 +577,6 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     QQ = kern(Q, Qd, Qdd, Fc, TH_k)  # (35, Ne)
     w_r = W_ROOT if sp.dynamics == "full" else W_ROOT / 100.0
     w_root = flight_root_weights(sp, s_ev, w_r)  # (Ne,): W_FLIGHT at evaluation points in flight
-    if sp.end_weight_ramp > 0:
-        w_root = w_root * airborne_end_factor(sp, ch, t_ev)
     scale = OBJ_SCALE / mg  # residuals in units of body weight, objective O(1–100)
     wt = ca.sqrt(ca.DM(wq).T * T1)  # (1, N)
     rho_m = SA_ev * QQ[:N_JOINT, :]

@@ -41,25 +41,6 @@ def test_simpson_points_integrate_quadratics_and_interpolate_linearly():
     np.testing.assert_allclose(g @ M, 2 * s_ev - 1, atol=1e-15)  # a linear function is kept exactly
 
 
-def test_two_panels_add_the_quarter_points_and_integrate_piecewise_quadratics():
-    s = np.array([0.0, 0.1, 0.25, 0.26, 0.7, 1.0])
-    s_ev, w, M = _dense_points(s, 2)
-    assert len(s_ev) == len(s) + 3 * (len(s) - 1)
-    np.testing.assert_allclose(s_ev[len(s):len(s) + 3], [0.025, 0.05, 0.075])
-    # linear on each half interval, kinked at the midpoints: exact with two panels, not with one
-    def kink(x):  # |x − m| − h/2 on each interval (midpoint m, length h): 0 at the nodes, kinked at m
-        x = np.asarray(x, float)
-        k = np.clip(np.searchsorted(s, x, side="right") - 1, 0, len(s) - 2)
-        m, h = 0.5 * (s[k] + s[k + 1]), s[k + 1] - s[k]
-        return np.abs(x - m) - 0.5 * h
-    exact = sum(-0.25 * h ** 2 for h in np.diff(s))
-    assert np.dot(w, kink(s_ev)) == pytest.approx(exact, rel=1e-6)
-    s1, w1, _ = _dense_points(s)
-    assert abs(np.dot(w1, kink(s1)) - exact) > 1e-3 * exact
-    g = np.sin(s)
-    np.testing.assert_allclose(g @ M, np.interp(s_ev, s, g), atol=1e-15)
-
-
 def test_nodes_hold_every_knot_and_contact_end_and_forces_vanish_there(short_walk):
     steps, m = short_walk
     nlp = transcribe(Subproblem(CH, STYLE, m, steps, free=frozenset({"q"})), derivatives=False)
