@@ -102,7 +102,7 @@ def _root_path(footsteps: tuple[Footstep, ...], times: np.ndarray):
 
 def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1: float,
                    ctrl_per_second: float = 24.0, run: bool | float = False,
-                   example=None, ground=None, root_on_feet: bool = False) -> Motion:
+                   example=None, ground=None) -> Motion:
     """An initial motion over [t0, t1] (s) for the given footsteps.
 
     ``example``: optional example poses matched by leg phase, (codes (T, 2), joint angles
@@ -144,11 +144,6 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
         q[i, 4] = np.deg2rad(3 + 5 * w_run)  # slight forward lean, more when running
     # an edited body (locked joints, reduced ranges) starts inside its limits
     q[:, N_ROOT:] = np.clip(q[:, N_ROOT:], ch.lower[N_ROOT:], ch.upper[N_ROOT:])
-    if root_on_feet:
-        from scenegraph.model.ground import FLAT
-        from scenegraph.model.initial_root import fit_root_to_footprints
-
-        q = fit_root_to_footprints(ch, footsteps, times, q, ground or FLAT)
     return Motion.from_samples(times, q, max(6, int(round((t1 - t0) * ctrl_per_second)) + 3))
 
 

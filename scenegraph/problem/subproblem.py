@@ -98,11 +98,6 @@ class Subproblem:
     window: tuple[float, float] | None = None
     free: frozenset = frozenset({"q", "warp"})
     dynamics: str = "full"
-    kin_smooth: float = 0.0  # kinematic pre-solve only: weight of the second differences (over control
-    # points, per DOF) of the change it makes to the initial motion, so a correction is spread smoothly
-    # instead of bending single control points (0: off, the project's pre-solve; docs/learning.md)
-    kin_root_weight: float = 1.0  # kinematic pre-solve only: the pull toward the initial motion's root
-    # position (x, y, z) relative to the joints' (1: the same; > 1: feet reach their footprints by the legs)
     targets: tuple[HandleTarget, ...] = ()
     poses: tuple[PoseTarget, ...] = ()
     avoid: tuple[Avoid, ...] = ()

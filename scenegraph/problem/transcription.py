@@ -586,15 +586,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     root_energy = ca.sumsqr(ca.vec(QQ[N_JOINT:, :] * ca.repmat(wt, N_ROOT, 1)))
 
     if sp.dynamics == "kinematic":  # stay close to the initial motion; no dynamics at all
-        if sp.kin_root_weight != 1.0:
-            wd = np.ones(N_DOF)
-            wd[:3] = sp.kin_root_weight
-            rho_dyn = (P_flat - P_fixed) * ca.DM(np.tile(wd, K)) * KIN_WEIGHT
-        else:
-            rho_dyn = ca.vec(P_flat - P_fixed) * KIN_WEIGHT
-        if sp.kin_smooth > 0.0 and K > 2:  # a smooth correction: second differences of P − P_fixed
-            dP = P - ca.reshape(P_fixed, N_DOF, K).T  # (K, 35)
-            rho_dyn = ca.vertcat(rho_dyn, ca.vec(dP[2:, :] - 2 * dP[1:-1, :] + dP[:-2, :]) * sp.kin_smooth)
+        rho_dyn = ca.vec(P_flat - P_fixed) * KIN_WEIGHT
     rho_extra = [1e-3 * xL]  # tiny λ regularisation keeps the contact split well posed
 
     def state_at(t):
