@@ -128,7 +128,9 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     from scenegraph.nio import heldout as H
     from scenegraph.model.audit import audit_motion
     from scenegraph.nio import example_of
+    from scenegraph.model.gait import initial_motion
     from scenegraph.model.style import default_style
+    from scenegraph.nio.plausibility import best_fit_root_residual
     from scenegraph.problem.synthesis import synthesize
 
     from schedules.cli.learn import clip_target
@@ -211,8 +213,13 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
             "direction": H.direction_score(train["features"], real_feat, feat) if train else None,
             "per_stride_rms_deg": per_stride[name],
             "audit": {**audits[name].to_dict(), "passes": bool(audits[name].passes())},
+            "best_fit_root_residual": best_fit_root_residual(ch, styles.get(name, learned), m, steps).summary(),
             "solver": solver[name],
         }
+    m0 = initial_motion(ch, steps, t0, t1, example=example)
+    start = {"best_fit_root_residual": best_fit_root_residual(ch, learned, m0, steps).summary(),
+             "what": "the initial motion before the kinematic pre-solve: the training clip's poses by leg phase, "
+                     "the root through the test footprints' midpoints (scenegraph.model.gait.initial_motion)"}
     paired = {}
     for other in ("default", "springs_off", "kinematic"):
         paired[f"learned-{other}"] = {
@@ -236,6 +243,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         "alignment": "by time: every variant plants the trial's own footsteps at the trial's times, so its "
                      "footfalls are the trial's",
         "initial_motion": example_src,
+        "start": start,
         "max_iter": max_iter,
         "contacts": contacts,
         "constraint_hz": constraint_hz,
