@@ -113,9 +113,7 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
     height under the pelvis (default flat, z = 0).
     """
     times = np.linspace(t0, t1, max(8, int((t1 - t0) * 60) + 1))
-    # the root path through footprint midpoints timed by whole stances: a stance cut by t0 or t1 would
-    # put its midpoint knot too early (late) and the extrapolated path ahead of the feet
-    xy, heading = _root_path(_uncut(footsteps, t0, t1), times)
+    xy, heading = _root_path(footsteps, times)
     stand = standing_pose(ch)
     q = np.zeros((len(times), N_DOF))
     ex_phases, phase_steps = None, footsteps

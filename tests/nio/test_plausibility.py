@@ -76,25 +76,3 @@ def test_a_push_beyond_friction_keeps_the_cone_distance(ch):
     bound = 1.2 / np.sqrt(1 + 0.8 ** 2)
     assert np.all(b.force_bw[5:-5] >= bound - 1e-3)
     assert np.median(b.force_bw) < bound + 0.3  # and the fit gets near it (moments traded a little)
-
-
-
-def test_root_path_of_a_cut_window_follows_the_whole_stances(ch):
-    # a window that starts and ends inside stances: its root path must be the same as the whole
-    # plan's over the window (before, the cut stances' midpoints were early / late and the
-    # extrapolated root ran ahead of the feet: 07_12 by 31 cm at its last frame)
-    from dataclasses import replace
-
-    from scenegraph.model.footsteps import footsteps_for_walk
-    from scenegraph.model.gait import initial_motion
-
-    steps = footsteps_for_walk(n_steps=6)
-    whole = initial_motion(ch, steps, steps[0].t0, steps[-1].t1)
-    a = steps[1].t0 + 0.6 * (steps[1].t1 - steps[1].t0)  # inside the second stance
-    b = steps[-2].t0 + 0.3 * (steps[-2].t1 - steps[-2].t0)  # inside the second-to-last stance
-    cut = tuple(replace(s, t0=max(s.t0, a), t1=min(s.t1, b)) for s in steps[1:-1])
-    part = initial_motion(ch, cut, a, b)
-    t = np.linspace(a, b, 40)
-    qw = whole.canonical(whole.to_canonical(t))
-    qp = part.canonical(part.to_canonical(t))
-    assert np.abs(qp[:, :2] - qw[:, :2]).max() < 0.03  # m
