@@ -95,20 +95,26 @@ def test_rows_for_a_heavy_and_a_light_character():
         assert np.abs(_rows(ch, q, qd, t)).max() < 1e-9
 
 
-def test_the_chain_rule_jacobian_equals_casadis_ad_jacobian_with_a_free_warp():
-    """flight_jacobian (per-point momenta Jacobian × ∂(q, q̇)/∂x, plus the gravity term's time
-    derivative) against CasADi's AD Jacobian of the same rows, on a random B-spline-like linear
-    map from x to poses and velocities and a free time map (the warp)."""
-    from scenegraph.problem.flight import flight_jacobian
+def _random_flight_map(seed: int, nx: int, n: int = 7):
+    """A random B-spline-like linear map from x (nx) to n poses and velocities around standing,
+    a time map moving with x (a free warp), and two overlapping flight groups."""
     ch = default_character()
-    rng = np.random.default_rng(5)
-    n, nx = 7, 40
+    rng = np.random.default_rng(seed)
     x = ca.MX.sym("x", nx)
     A, B = rng.standard_normal((N_DOF * n, nx)) * 0.05, rng.standard_normal((N_DOF * n, nx)) * 0.3
     Q = ca.reshape(ca.DM(np.tile(standing_pose(ch), n)) + ca.mtimes(ca.DM(A), x), N_DOF, n)
     Qd = ca.reshape(ca.mtimes(ca.DM(B), x), N_DOF, n)
     T = ca.reshape(ca.DM(np.linspace(0.0, 0.3, n)) + 0.01 * ca.mtimes(ca.DM(rng.standard_normal((n, nx))), x), 1, n)
-    groups = [np.arange(0, 4), np.arange(3, 7)]
+    return ch, rng, x, Q, Qd, T, [np.arange(0, 4), np.arange(3, 7)]
+
+
+def test_the_chain_rule_jacobian_equals_casadis_ad_jacobian_with_a_free_warp():
+    """flight_jacobian (per-point momenta Jacobian × ∂(q, q̇)/∂x, plus the gravity term's time
+    derivative) against CasADi's AD Jacobian of the same rows, on a random B-spline-like linear
+    map from x to poses and velocities and a free time map (the warp)."""
+    from scenegraph.problem.flight import flight_jacobian
+    nx = 40
+    ch, rng, x, Q, Qd, T, groups = _random_flight_map(seed=5, nx=nx)
     rows = flight_constraints(ch, groups, Q, Qd, T)
     f = ca.Function("f", [x], [flight_jacobian(ch, groups, Q, Qd, T, x), ca.jacobian(rows, x)])
     J, J_ad = (np.array(ca.densify(v)) for v in f(rng.standard_normal(nx)))
@@ -120,15 +126,8 @@ def test_the_rows_curvature_equals_casadis_ad_hessian():
     """flight_hessian (per-point momenta curvature, weighted by the rows' multipliers) against
     CasADi's AD Hessian of λ · rows, (q, q̇) linear in x and the times moving with x."""
     from scenegraph.problem.flight import flight_hessian
-    ch = default_character()
-    rng = np.random.default_rng(7)
-    n, nx = 7, 30
-    x = ca.MX.sym("x", nx)
-    A, B = rng.standard_normal((N_DOF * n, nx)) * 0.05, rng.standard_normal((N_DOF * n, nx)) * 0.3
-    Q = ca.reshape(ca.DM(np.tile(standing_pose(ch), n)) + ca.mtimes(ca.DM(A), x), N_DOF, n)
-    Qd = ca.reshape(ca.mtimes(ca.DM(B), x), N_DOF, n)
-    T = ca.reshape(ca.DM(np.linspace(0.0, 0.3, n)) + 0.01 * ca.mtimes(ca.DM(rng.standard_normal((n, nx))), x), 1, n)
-    groups = [np.arange(0, 4), np.arange(3, 7)]
+    nx = 30
+    ch, rng, x, Q, Qd, T, groups = _random_flight_map(seed=7, nx=nx)
     rows = flight_constraints(ch, groups, Q, Qd, T)
     lam = ca.MX.sym("lam", rows.shape[0])
     f = ca.Function("f", [x, lam], [flight_hessian(ch, groups, Q, Qd, lam, x), ca.hessian(ca.dot(lam, rows), x)[0]])
