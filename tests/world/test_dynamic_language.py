@@ -82,10 +82,15 @@ def test_a_jump_is_a_ground_flight_ground_plan_with_a_ballistic_flight_term():
     assert sp.flights == ((0.8, 1.28),)
     s = transcribe(sp, derivatives=False).s_points
     inside = (s * 2.0 > 0.8 - 1e-6) & (s * 2.0 < 1.28 + 1e-6)  # the take-off and touch-down points too
-    # by default the flight term becomes momentum equalities: 6 per flight point after the first
+    assert inside.sum() >= 3
+    # by default the flight term becomes momentum equalities: 6 per evaluation point of the flight
+    # (collocation nodes and the midpoints between them, ends included) after the first
     mom = transcribe(sp, derivatives=False)
     (grp,) = [sl for name, sl, kind in mom.groups if name == "flight_momentum"]
-    assert grp.stop - grp.start == 6 * (inside.sum() - 1)
+    t_ev = sp.motion.time(mom.s_eval)
+    in_ev = int(np.sum((t_ev > 0.8 - 1e-6) & (t_ev < 1.28 + 1e-6)))
+    assert in_ev == 2 * inside.sum() - 1  # every node of the flight and every midpoint between them
+    assert grp.stop - grp.start == 6 * (in_ev - 1)
     assert flight_root_weights(sp, s, W_ROOT).max() == W_ROOT  # no stiff term with the equalities
     # the penalty formulation (flight_mode "penalty") makes the root residual stiff (W_FLIGHT) at every
     # evaluation point of the flight; the same grid, the same residuals elsewhere
