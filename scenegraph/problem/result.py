@@ -18,7 +18,7 @@ from scenegraph.model.footsteps import Footstep
 from scenegraph.model.motion import Motion
 from scenegraph.problem.transcription import NLP
 
-__all__ = ["Result", "SolveTiming", "read_solution", "violations"]
+__all__ = ["Result", "SolveTiming", "read_solution", "violations", "violation_scale"]
 
 
 @dataclass(frozen=True)
@@ -87,14 +87,23 @@ class Result:
                 f"E={self.energy:.4g}, worst violation {worst[0]}={worst[1]:.2e}")
 
 
+def violation_scale(nlp: NLP, name: str) -> float:
+    """Factor from a constraint group's rows to the unit its violation is reported in: 1 for
+    positions (m) and most groups; 1/M for ``flight_momentum``, whose rows are momenta (kg·m/s,
+    kg·m²/s) — reported per kilogram of body (m/s of the centre of mass, m²/s), so one tolerance
+    means the same for a child and an adult (a 1e-3 kg·m/s row is 1.4e-5 m/s for 73 kg)."""
+    return 1.0 / nlp.sp.character.total_mass if name == "flight_momentum" else 1.0
+
+
 def violations(nlp: NLP, x: np.ndarray, p: np.ndarray | None = None) -> dict[str, float]:
-    """Worst violation per constraint group (m for positions; 0 when satisfied) of ``x`` with
-    parameters ``p`` (default: the NLP's own ``p0``)."""
+    """Worst violation per constraint group of ``x`` with parameters ``p`` (default: the NLP's own
+    ``p0``); 0 when satisfied.  Units: m for positions, per kilogram of body for the flight
+    momenta (:func:`violation_scale`)."""
     gv = np.asarray(nlp.g_fn(x, nlp.p0 if p is None else p)).ravel()
     out = {}
     for name, sl, _ in nlp.groups:
         lo, hi, v = nlp.lbg[sl], nlp.ubg[sl], gv[sl]
-        viol = np.maximum(np.maximum(lo - v, v - hi), 0.0)
+        viol = np.maximum(np.maximum(lo - v, v - hi), 0.0) * violation_scale(nlp, name)
         key = name.split(":")[0] if name.startswith("target") else name
         out[key] = max(out.get(key, 0.0), float(viol.max()) if viol.size else 0.0)
     return out

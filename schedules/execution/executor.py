@@ -65,7 +65,7 @@ __all__ = ["run_schedule", "StepFailed", "StepRecord", "RunResult", "STOP_EXIT",
            "run_fingerprint", "RunInterrupted"]
 
 STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
-VIOLATION_TOL = 1e-3  # m (or the constraint's unit): a hard constraint group violated by more fails the step
+VIOLATION_TOL = 1e-3  # m, m/s per kg for flight momenta (result.violation_scale): a hard group violated by more fails the step
 FORMAT = 2  # run-folder format (1: pickled checkpoints, no longer read)
 WARM_IPOPT = (("mu_strategy", "monotone"), ("mu_init", 1e-4))  # full steps warm-started from full steps
 

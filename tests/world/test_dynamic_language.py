@@ -91,6 +91,11 @@ def test_a_jump_is_a_ground_flight_ground_plan_with_a_ballistic_flight_term():
     in_ev = int(np.sum((t_ev > 0.8 - 1e-6) & (t_ev < 1.28 + 1e-6)))
     assert in_ev == 2 * inside.sum() - 1  # every node of the flight and every midpoint between them
     assert grp.stop - grp.start == 6 * (in_ev - 1)
+    # their violation is judged per kilogram of body (m/s, m²/s): the rows are momenta
+    from scenegraph.problem.result import violations
+    g = np.asarray(mom.g_fn(mom.x0, mom.p0)).ravel()[grp]
+    assert np.abs(g).max() > 0.1  # the initial motion is no flight
+    assert violations(mom, mom.x0)["flight_momentum"] == pytest.approx(np.abs(g).max() / sp.character.total_mass)
     assert flight_root_weights(sp, s, W_ROOT).max() == W_ROOT  # no stiff term with the equalities
     # the penalty formulation (flight_mode "penalty") makes the root residual stiff (W_FLIGHT) at every
     # evaluation point of the flight; the same grid, the same residuals elsewhere
