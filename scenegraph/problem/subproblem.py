@@ -48,6 +48,19 @@ class PoseTarget:
 
 
 @dataclass(frozen=True)
+class VelocityTarget:
+    """Soft spring toward the centre-of-mass velocity ``velocity`` (m/s, world frame) at world
+    time ``t``; ``weight`` in (s/m)² of the normalised objective (E units).  A scene's start:
+    the character enters with the momentum of its planned motion instead of whatever momentum
+    the first contact forces could take out (the ground force is not part of the energy)."""
+
+    t: float
+    velocity: tuple[float, float, float]
+    weight: float = 1.0
+    name: str = "velocity"
+
+
+@dataclass(frozen=True)
 class Spring:
     """A physical spring on ``handle``: force stiffness · (anchor(t) − handle position) (N, world).
 
@@ -102,6 +115,7 @@ class Subproblem:
     dynamics: str = "full"
     targets: tuple[HandleTarget, ...] = ()
     poses: tuple[PoseTarget, ...] = ()
+    velocities: tuple[VelocityTarget, ...] = ()
     avoid: tuple[Avoid, ...] = ()
     springs: tuple[Spring, ...] = ()
     style_end: Style | None = None

@@ -73,7 +73,7 @@ from scenegraph.model.motion import basis
 from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
 from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, W_ROOT, compiled_kernel, handles_kernel,
                         kernel_hessian, theta_kernel_vector)
-from scenegraph.problem.flight import flight_constraints, flight_groups, flight_hessian, flight_jacobian
+from scenegraph.problem.flight import flight_constraints, flight_groups, flight_hessian, flight_jacobian, momenta_fn
 from scenegraph.problem.gram import dynamics_gauss_newton
 from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
@@ -624,6 +624,10 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         rho_extra.append(np.sqrt(pose.weight) * (q_t - ca.DM(pose.q)))
         if pose.velocity is not None:
             rho_extra.append(0.1 * np.sqrt(pose.weight) * (qd_t - ca.DM(pose.velocity)))
+    for vt in sp.velocities:  # centre-of-mass velocity P / M (flight.momenta_fn)
+        q_t, qd_t, _ = state_at(vt.t)
+        v_com = momenta_fn(ch)(q_t, qd_t)[1] / ch.total_mass
+        rho_extra.append(np.sqrt(vt.weight) * (v_com - ca.DM(vt.velocity)))
     for a in sp.avoid:
         q_t, _, _ = state_at(a.t)
         i = hk_names.index(a.handle)

@@ -38,8 +38,10 @@ from scenarios.errors import ComposeError
 from scenegraph.model.clearance import CLEARANCE_WEIGHT
 from scenegraph.model.footsteps import airborne_gaps
 from scenegraph.problem.joint import JointCoupling, coupling_times
+from scenegraph.model.body import N_DOF
 from scenegraph.model.motion import Motion
-from scenegraph.problem import HandleTarget, PoseTarget, Subproblem, window_mask
+from scenegraph.problem import HandleTarget, PoseTarget, Subproblem, VelocityTarget, window_mask
+from scenegraph.problem.flight import momenta_fn
 from scenegraph.problem.no_slip import NO_SLIP_WEIGHT
 from scenegraph.problem.stance_frame import STANCE_FRAME_WEIGHT
 from scenegraph.world.clearance import scene_clearance
@@ -126,6 +128,20 @@ def gait_flights(footsteps, flights=()) -> tuple[tuple[float, float], ...]:
                  if not any(fa < b - 1e-6 and a < fb - 1e-6 for fa, fb in flights))
 
 
+def start_velocity(st, weight: float) -> VelocityTarget:
+    """The scene's start: the centre of mass's velocity (m/s, world) at the motion's start pulled
+    toward the current motion's — the planned gait's in the first step — with ``weight`` (the
+    start spring's, 1/m² there, (s/m)² here: 1 m/s counts like 1 m).  Without it the initial
+    momentum is free, and a walk_to walker entered falling at 6.3 m/s, caught by 12 body weights
+    of ground force in the first 0.05 s (two_walkers' bob, docs/results.md); a target on the
+    pelvis's velocity alone left the limbs falling (4.1 m/s, 8 body weights)."""
+    m = st.motion
+    q, qd, _ = (np.asarray(a, float).reshape(-1, N_DOF)[0] for a in m.at([m.start]))
+    _, P, _ = momenta_fn(st.character)(q, qd)
+    v = np.asarray(P, float).ravel() / st.character.total_mass
+    return VelocityTarget(m.start, tuple(float(a) for a in v), weight, name="start_velocity")
+
+
 def _goal_weights(step: Step) -> dict[str, float | str]:
     return {n.split(":", 1)[1]: w for n, w in step.terms if n.startswith("goal:")}
 
@@ -171,16 +187,18 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
             continue  # lower_joint
         targets += coupling_targets(scene, who, cname, float(w), win, rate=COUPLING_TARGET_HZ)
         springs += coupling_springs(scene, who, cname, float(w), win)
+    velocities = ()
     w_start = step.term("start")
     if w_start is not None and win[0] <= m.start + 1e-9:
         x, y, _ = st.start
         z = float(handle_track(st, "pelvis", [m.start])[0][2])
         targets += (HandleTarget("pelvis", m.start, (x, y, z), float(w_start), name="start"),)
+        velocities = (start_velocity(st, float(w_start)),)
     style = style_at(scene, who, step, step.window[0])
     style_end = style_at(scene, who, step, step.window[1])
     if style_end is style:
         style_end = None
-    sp = Subproblem(st.character, style, m, steps, flights=flights, poses=poses,
+    sp = Subproblem(st.character, style, m, steps, flights=flights, poses=poses, velocities=velocities,
                     window=None if whole else win, free=frozenset(free),
                     dynamics="full" if step.term("dynamics") == HARD else "relaxed", targets=targets, avoid=avoid,
                     springs=springs, style_end=style_end,

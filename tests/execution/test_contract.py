@@ -323,3 +323,39 @@ def test_a_runs_flights_are_ballistic_flights_of_its_full_steps_only():
     walk = build_scene(load_scenario("walk"))
     wstep = next(s for s in compile_schedule(load_scenario("walk")).order() if s.kind == "full")
     assert lower(walk, wstep, walk.characters[0].name)[0].flights == ()
+
+
+def test_the_scene_start_holds_the_planned_entry_speed():
+    """A step that contains the scene's start pulls the root's velocity there toward the current
+    motion's (the planned gait's speed): with the initial momentum free, bob of two_walkers
+    entered falling at 6.3 m/s, caught by 12 body weights of ground force.  A window that starts
+    later has no such term; the term costs nothing at the planned speed and grows with the
+    squared departure."""
+    scn = load_scenario("two_walkers")
+    scene = build_scene(scn)
+    order = compile_schedule(scn).order()
+    full = next(s for s in order if s.kind == "full" and "bob" in s.characters)
+    sp, _ = lower(scene, full, "bob")
+    (vt,) = sp.velocities
+    st = scene.character("bob")
+    m = st.motion
+    # the centre of mass's velocity by finite differences of its position (momenta_fn's c)
+    from scenegraph.problem.flight import momenta_fn
+    c = [np.asarray(momenta_fn(st.character)(np.asarray(m.at([t])[0]).ravel(), np.zeros(35))[0]).ravel()
+         for t in (m.start, m.start + 1e-5)]
+    assert vt.t == m.start
+    np.testing.assert_allclose(vt.velocity, (c[1] - c[0]) / 1e-5, atol=2e-3)
+    assert np.hypot(*vt.velocity[:2]) > 0.5  # a walk_to walker enters walking
+    # 1 m/s off the planned speed costs weight (in E; the objective is OBJ_SCALE² E): w((1 + d)² − d²)
+    # with d the departure of the initial motion itself, so |d| < 0.005 m/s there
+    with_v = transcribe(sp, derivatives=False)
+    off = transcribe(replace(sp, velocities=(replace(vt, velocity=(vt.velocity[0] + 1.0,) + vt.velocity[1:]),)),
+                     derivatives=False)
+    from scenegraph.problem.transcription import OBJ_SCALE
+    gain = float(off.f_fn(off.x0, off.p0)) - float(with_v.f_fn(with_v.x0, with_v.p0))
+    assert gain == pytest.approx(OBJ_SCALE**2 * vt.weight, rel=1e-2)
+    tackle = load_scenario("tackle_dodge")
+    later = [s for s in compile_schedule(tackle).order() if s.kind == "full" and s.window[0] > 0]
+    assert later
+    sc2 = build_scene(tackle)
+    assert lower(sc2, later[0], later[0].characters[0])[0].velocities == ()

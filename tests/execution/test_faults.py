@@ -30,6 +30,24 @@ from schedules.cli.main import main
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.fixture(autouse=True)
+def _interruptible():
+    """These tests stop runs with SIGINT, as a terminal's Ctrl-C does.  A process started with
+    SIGINT ignored (a shell's background job ``&``, nohup) keeps it ignored on purpose
+    (interrupts.catching_interrupts), and so would the test process and its children: restore
+    Python's default handler for the test (and SIG_DFL in the children, :func:`_default_sigint`)."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _default_sigint() -> None:
+    """Popen ``preexec_fn``: the child starts with SIGINT's default disposition."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _env(**extra) -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
@@ -122,7 +140,7 @@ def test_sigint_during_a_real_solve_exits_130_with_a_resume_hint(tmp_path):
     as step 1 is reported, i.e. while step 2 is being built or solved."""
     p = subprocess.Popen([sys.executable, "-m", "schedules.cli.main", "run", "walk", "-o", "w.usda", "--run-dir", "run"],
                          cwd=tmp_path, env=_env(COMPOSE_MAX_ITER="20"), stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True)
+                         stderr=subprocess.STDOUT, text=True, preexec_fn=_default_sigint)
     lines = []
     for line in p.stdout:
         lines.append(line)
