@@ -57,7 +57,7 @@ from scenegraph.problem.synthesis import presolve_kinematics
 
 from schedules.execution import interrupts
 from schedules.execution.checkpoints import CheckpointError, Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
-from schedules.execution.lower import iteration_cap, lower, lower_joint
+from schedules.execution.lower import iteration_cap, leap_flights_of, lower, lower_joint
 from schedules.plan.step import FULL, Schedule, Step
 from schedules.execution.interrupts import RunInterrupted, catching_interrupts, crash_message, debug_enabled, format_traceback
 
@@ -155,7 +155,8 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
         pre_info = None
         if who in presolve:
             st = cur.character(who)
-            pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=cur.ground)
+            pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=cur.ground,
+                                      flights=leap_flights_of(cur, who))
             interrupts.check()
             pre_info = {"status": pre.status, "success": pre.success, "iterations": pre.iterations,
                         "seconds": pre.seconds}
@@ -219,7 +220,8 @@ def _write_back(cur: Scene, who: str, sp, mask, res, pre_info, out: dict) -> Sce
 def presolve_character(scene: Scene, who: str) -> dict:
     """Make a character's initial motion satisfy its footsteps and the ground (no dynamics)."""
     st = scene.character(who)
-    pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground)
+    pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground,
+                              flights=leap_flights_of(scene, who))
     interrupts.check()
     return {"step": f"presolve:{who}", "ctrl": np.asarray(pre.motion.ctrl, float),
             "warp": np.asarray(pre.motion.warp, float), "status": pre.status, "success": bool(pre.success),
