@@ -68,6 +68,12 @@ STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m, m/s per kg for flight momenta (result.violation_scale): a hard group violated by more fails the step
 FORMAT = 2  # run-folder format (1: pickled checkpoints, no longer read)
 WARM_IPOPT = (("mu_strategy", "monotone"), ("mu_init", 1e-4))  # full steps warm-started from full steps
+PRESOLVE_FLIGHTS = False  # True: the kinematic pre-solve holds the jump/hop flights' ballistic momentum rows too
+# (lower.leap_flights_of).  Measured A/B, round 13 (docs/dynamic-motion.md): the full step then starts 2 kg·m/s
+# instead of 290 from its flight rows, but the iteration count did not fall reliably — broad_jump 157 -> 103
+# (E 2146 -> 1975, stage audit fail -> pass), twist_jump 101 -> 274 (E 1249 -> 698, shoulder line turns 113
+# deg of 90: its slow test fails), a 1.5 m broad jump 127 -> 219 (E 3047 -> 3162) — and the pre-solve costs
+# 13-32 s more CPU; off
 
 
 class StepFailed(ComposeError):
@@ -156,7 +162,7 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
         if who in presolve:
             st = cur.character(who)
             pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=cur.ground,
-                                      flights=leap_flights_of(cur, who))
+                                      flights=leap_flights_of(cur, who) if PRESOLVE_FLIGHTS else ())
             interrupts.check()
             pre_info = {"status": pre.status, "success": pre.success, "iterations": pre.iterations,
                         "seconds": pre.seconds}
@@ -221,7 +227,7 @@ def presolve_character(scene: Scene, who: str) -> dict:
     """Make a character's initial motion satisfy its footsteps and the ground (no dynamics)."""
     st = scene.character(who)
     pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground,
-                              flights=leap_flights_of(scene, who))
+                              flights=leap_flights_of(scene, who) if PRESOLVE_FLIGHTS else ())
     interrupts.check()
     return {"step": f"presolve:{who}", "ctrl": np.asarray(pre.motion.ctrl, float),
             "warp": np.asarray(pre.motion.warp, float), "status": pre.status, "success": bool(pre.success),
