@@ -72,8 +72,8 @@ PRESOLVE_FLIGHTS = False  # True: the kinematic pre-solve holds the jump/hop fli
 # (lower.leap_flights_of).  Measured A/B, round 13 (docs/dynamic-motion.md): the full step then starts 2 kg·m/s
 # instead of 290 from its flight rows, but the iteration count did not fall reliably — broad_jump 157 -> 103
 # (E 2146 -> 1975, stage audit fail -> pass), twist_jump 101 -> 274 (E 1249 -> 698, shoulder line turns 113
-# deg of 90: its slow test fails), a 1.5 m broad jump 127 -> 219 (E 3047 -> 3162) — and the pre-solve costs
-# 13-32 s more CPU; off
+# deg of 90: its slow test fails), a 1.5 m broad jump 127 -> 219 (E 3047 -> 3162), the sketched leap still capped at
+# 300 (E 7465, audit fails) — and the pre-solve costs 13-32 s more CPU; off
 
 
 class StepFailed(ComposeError):
