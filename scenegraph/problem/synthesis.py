@@ -29,7 +29,15 @@ class Synthesis:
 
 def presolve_kinematics(ch: Character, style: Style, motion: Motion, footsteps: tuple[Footstep, ...],
                         **kw) -> Result:
-    """Make an initial motion satisfy footsteps and ground constraints (no dynamics)."""
+    """Make an initial motion satisfy footsteps and ground constraints (no dynamics).
+
+    With ``flights`` (world s (take-off, landing)) the ballistic momentum rows of the full step
+    (:mod:`.flight`) are held too, with their exact curvature: a jump's full step then starts with its
+    flight rows satisfied (broad_jump: 2.05 instead of 290 kg·m/s, docs/dynamic-motion.md round 13);
+    without that curvature this pre-solve ran to its 300-iteration cap (126 iterations with it).  The
+    executor does not pass flights (``executor.PRESOLVE_FLIGHTS``: measured, the iteration count did not fall)."""
+    if kw.get("flights"):
+        kw.setdefault("flight_curvature", True)
     return solve(Subproblem(ch, style, motion, footsteps, free=frozenset({"q"}), dynamics="kinematic",
                             label="kinematic", **kw))
 

@@ -640,7 +640,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         if rows is not None:
             add("clearance", rows, 0.0, np.inf, "ineq")
 
-    if sp.dynamics == "full" and sp.flight_mode == "momentum" and sp.flights:  # ballistic flight (.flight)
+    if sp.dynamics != "relaxed" and sp.flight_mode == "momentum" and sp.flights:  # ballistic flight (.flight)
         # at every evaluation point in flight, nodes and midpoints: stated at the nodes alone, a run's
         # flights wiggled between them (0.05 body weight at 120 Hz, tackle, docs/results.md)
         dep = _depend_on_free(K, s_ev, mask, warp_free)  # a window: only points its free control points move

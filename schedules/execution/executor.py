@@ -57,7 +57,7 @@ from scenegraph.problem.synthesis import presolve_kinematics
 
 from schedules.execution import interrupts
 from schedules.execution.checkpoints import CheckpointError, Manifest, RunLock, checkpoint_names, read_checkpoint, write_checkpoint
-from schedules.execution.lower import iteration_cap, lower, lower_joint
+from schedules.execution.lower import iteration_cap, leap_flights_of, lower, lower_joint
 from schedules.plan.step import FULL, Schedule, Step
 from schedules.execution.interrupts import RunInterrupted, catching_interrupts, crash_message, debug_enabled, format_traceback
 
@@ -68,6 +68,12 @@ STOP_EXIT = 75  # exit code of the COMPOSE_STOP_AFTER test hook
 VIOLATION_TOL = 1e-3  # m, m/s per kg for flight momenta (result.violation_scale): a hard group violated by more fails the step
 FORMAT = 2  # run-folder format (1: pickled checkpoints, no longer read)
 WARM_IPOPT = (("mu_strategy", "monotone"), ("mu_init", 1e-4))  # full steps warm-started from full steps
+PRESOLVE_FLIGHTS = False  # True: the kinematic pre-solve holds the jump/hop flights' ballistic momentum rows too
+# (lower.leap_flights_of).  Measured A/B, round 13 (docs/dynamic-motion.md): the full step then starts 2 kg·m/s
+# instead of 290 from its flight rows, but the iteration count did not fall reliably — broad_jump 157 -> 103
+# (E 2146 -> 1975, stage audit fail -> pass), twist_jump 101 -> 274 (E 1249 -> 698, shoulder line turns 113
+# deg of 90: its slow test fails), a 1.5 m broad jump 127 -> 219 (E 3047 -> 3162), the sketched leap still capped at
+# 300 (E 7465, audit fails) — and the pre-solve costs 13-32 s more CPU; off
 
 
 class StepFailed(ComposeError):
@@ -155,7 +161,8 @@ def solve_step(scene: Scene, step: Step, presolve: tuple[str, ...], contacts: di
         pre_info = None
         if who in presolve:
             st = cur.character(who)
-            pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=cur.ground)
+            pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=cur.ground,
+                                      flights=leap_flights_of(cur, who) if PRESOLVE_FLIGHTS else ())
             interrupts.check()
             pre_info = {"status": pre.status, "success": pre.success, "iterations": pre.iterations,
                         "seconds": pre.seconds}
@@ -219,7 +226,8 @@ def _write_back(cur: Scene, who: str, sp, mask, res, pre_info, out: dict) -> Sce
 def presolve_character(scene: Scene, who: str) -> dict:
     """Make a character's initial motion satisfy its footsteps and the ground (no dynamics)."""
     st = scene.character(who)
-    pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground)
+    pre = presolve_kinematics(st.character, st.style, st.motion, st.footsteps, ground=scene.ground,
+                              flights=leap_flights_of(scene, who) if PRESOLVE_FLIGHTS else ())
     interrupts.check()
     return {"step": f"presolve:{who}", "ctrl": np.asarray(pre.motion.ctrl, float),
             "warp": np.asarray(pre.motion.warp, float), "status": pre.status, "success": bool(pre.success),

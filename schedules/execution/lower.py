@@ -51,7 +51,8 @@ from scenegraph.model.style import Style
 from schedules.plan.step import FREE, FULL, HARD, RELAXED, ROLES, STEP_KINDS, Step, vocabulary
 
 __all__ = ["lower", "lower_joint", "check_step", "HANDLED", "Lowered", "STALL_ITERATIONS", "SOFT_PIN_HZ",
-           "COUPLING_TARGET_HZ", "JOINT_COUPLING_HZ", "iteration_cap", "COUPLED_FULL_MAX_ITER", "gait_flights"]
+           "COUPLING_TARGET_HZ", "JOINT_COUPLING_HZ", "iteration_cap", "COUPLED_FULL_MAX_ITER", "gait_flights",
+           "leap_flights_of"]
 
 STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
 SOFT_PIN_HZ = 120.0  # soft footprint springs of full steps: planted feet still between collocation points
@@ -140,6 +141,15 @@ def start_velocity(st, weight: float) -> VelocityTarget:
     _, P, _ = momenta_fn(st.character)(q, qd)
     v = np.asarray(P, float).ravel() / st.character.total_mass
     return VelocityTarget(m.start, tuple(float(a) for a in v), weight, name="start_velocity")
+
+
+def leap_flights_of(scene: Scene, who: str) -> tuple[tuple[float, float], ...]:
+    """World s (take-off, landing) of every jump and hop goal of ``who`` (the goals with a
+    ``flight``), in time order.  The kinematic pre-solve states their ballistic momentum too
+    (``schedules.execution.executor.presolve_character``), so that a jump's full step starts with
+    its flight rows held instead of 4 m/s (per kg) away from them (docs/dynamic-motion.md, round 13)."""
+    return tuple(sorted(tuple(float(t) for t in g.flight) for g in scene.goals
+                        if g.character == who and getattr(g, "flight", None) is not None))
 
 
 def _goal_weights(step: Step) -> dict[str, float | str]:
