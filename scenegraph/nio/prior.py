@@ -191,10 +191,11 @@ def tie_scales(theta0: np.ndarray, alpha_ref: np.ndarray | None = None,
     if alpha_ref is not None:
         w[THETA_LAYOUT["alpha"]] = np.asarray(alpha_ref, float) * N_JOINT
     if typical is not None:
-        sym = tie_average(th0, tie_pairs("lr"))
+        lr = tie_pairs("lr")
+        sym, typ = tie_average(th0, lr), tie_average(np.asarray(typical, float), lr)
         for f in SPRING_FIELDS:
             sl = THETA_LAYOUT[f]
-            w[sl] = np.abs(sym[sl]) + 0.01 * np.asarray(typical, float)[sl]
+            w[sl] = np.abs(sym[sl]) + 0.01 * typ[sl]
     return w
 
 
