@@ -15,7 +15,8 @@ objective, dimensionless, contact forces profiled out):
   the cheaper; the ranking a predicting style needs);
 - ``split``: each motion's energy by part — the muscle terms α_j A_j summed over the joint
   groups legs / trunk (waist, chest, neck) / arms, and the rest (root residual, λ
-  regularisation) — which says *where* a rival is cheaper;
+  regularisation), with the root residual's own share as ``root`` when the NIO problem's
+  energy model gives it (:meth:`.energy.EnergyModel.parts`) — which says *where* a rival is cheaper;
 - ``G_local``: the held-out NIO loss E(X_real) − E(X_S) with X_S the local counterexample
   (one Gauss–Newton step from X_real within C, what ``compose learn`` trains with) — how far
   the real motion is from a local optimum of θ's energy, in the same units.
@@ -55,14 +56,19 @@ def rank_report(nio, theta: np.ndarray, real: Motion, rivals: dict[str, Motion],
     problem whose target is ``real`` (``local=True`` for ``G_local``)."""
     theta = np.asarray(theta, float)
     alpha = theta[ALPHA]
-    E_r, g_r, _, _ = nio.measure(theta, real)
+    E_r, g_r, _, lam_r = nio.measure(theta, real)
     split = {"real": energy_split(E_r, g_r[ALPHA], alpha)}
+    parts = getattr(getattr(nio, "model", None), "parts", None)
+    if parts is not None:
+        split["real"]["root"] = parts(theta, real, lam_r)["root"]
     E_riv, ratio = {}, {}
     for name, m in rivals.items():
-        E, g, _, _ = nio.measure(theta, m)
+        E, g, _, lam = nio.measure(theta, m)
         E_riv[name] = float(E)
         ratio[name] = float(np.log(max(E_r, 1e-300) / max(E, 1e-300)))
         split[name] = energy_split(E, g[ALPHA], alpha)
+        if parts is not None:
+            split[name]["root"] = parts(theta, m, lam)["root"]
     G = float(nio.evaluate(theta).G) if local_g else None
     worst = max(ratio.values()) if ratio else None
     line = (f"E_real={E_r:.3g} " + " ".join(f"E_{k}={v:.3g}" for k, v in E_riv.items())

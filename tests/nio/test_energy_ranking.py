@@ -84,3 +84,8 @@ def test_split_on_a_real_transcription_is_linear_in_alpha():
     s2 = energy_split(E2, g2[ALPHA], th2[ALPHA])
     assert s2["rest"] == pytest.approx(s["rest"], rel=1e-8)
     assert sum(s2.values()) == pytest.approx(E2, rel=1e-10)
+    # the muscle rows are Σ α_j A_j, and root + other is the rest
+    p = nio.model.parts(th2, m, lam)
+    assert p["muscle"] == pytest.approx(E2 - s2["rest"], rel=1e-8)
+    assert p["root"] + p["other"] == pytest.approx(s2["rest"], rel=1e-8)
+    assert p["root"] > 0 and p["other"] >= -1e-12
