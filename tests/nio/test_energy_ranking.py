@@ -55,6 +55,7 @@ def test_rank_report_sign_and_where_a_rival_is_cheaper():
     assert rep["log_ratio"]["flail"] == pytest.approx(np.log(E_real / E_fl))
     assert rep["log_ratio"]["flail"] > 0  # uniform α: the flailing motion is cheaper
     assert rep["split"]["flail"]["arms"] > rep["split"]["real"]["arms"]
+    assert rep["log_ratio_muscle"]["flail"] == pytest.approx(np.log((E_real - 0.1) / (E_fl - 0.1)))
     # weighting the arms up makes the real motion the cheaper one
     th2 = th.copy()
     th2[ALPHA] = np.where(arms, 10.0, 0.1)
