@@ -209,3 +209,37 @@ def test_learn_rejects_bad_prior_options_before_reading_the_clip(tmp_path, extra
                         "0:10", *extra, "-o", str(tmp_path / "s.yaml")], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and message in p.stderr
     assert not (tmp_path / "s.yaml").exists()
+
+
+@pytest.mark.slow
+def test_learn_with_strength_prior_and_coarse_ties_keeps_them():
+    """learn_style on a kinematically pre-solved three-step walk with the strength reference,
+    both priors and coarse ties: the learned θ holds every tie (α in a group keeps the
+    reference's ratios; left/right springs equal) and the provenance names the options; with no
+    iteration the style's α is the reference itself."""
+    from scenegraph.model.body import make_character
+    from scenegraph.model.footsteps import footsteps_for_walk
+    from scenegraph.model.gait import initial_motion
+    from scenegraph.nio import learn_style
+    from scenegraph.nio.prior import alpha_reference
+    from scenegraph.problem.synthesis import presolve_kinematics
+
+    ch = make_character("adult_male")
+    fs = footsteps_for_walk(n_steps=3, step_length=0.7)
+    m = presolve_kinematics(ch, default_style(ch.total_mass), initial_motion(ch, fs, 0.0, 1.3), fs).motion
+    ref = alpha_reference("strength")
+    kw = dict(prior_weight=0.1, alpha_ref="strength", spring_prior=0.1, tie="coarse")
+    r0 = learn_style(ch, m, fs, max_iter=0, **kw)
+    assert np.allclose(r0.style.alpha, ref, rtol=1e-9)
+    res = learn_style(ch, m, fs, max_iter=3, **kw)
+    th = res.theta
+    a = th[A] / ref
+    i = JOINT_DOF_NAMES.index
+    for pre in (("elbow_", "wrist_"), ("hip_",), ("ankle_", "toe_")):
+        idx = [j for j, d in enumerate(JOINT_DOF_NAMES) if d.startswith(pre)]
+        assert np.allclose(a[idx], a[idx[0]], rtol=1e-6)
+    for f in ("ks1", "ks2", "kd"):
+        s = THETA_LAYOUT[f].start
+        assert th[s + i("knee_flex_l")] == pytest.approx(th[s + i("knee_flex_r")], rel=1e-6, abs=1e-9)
+    prov = res.style.provenance.model_dump()
+    assert prov["alpha_ref"] == "strength" and prov["tie"] == "coarse" and prov["spring_prior"] == 0.1
