@@ -6,8 +6,8 @@ flexion, waist, shoulder flexion) to 0 — "that joint costs nothing" makes X_T 
 one motion and predicts nothing about another (both `walk` from 07_01 and the style learned
 from 16_18's straight part have α = 0 at hip_flex and waist_flex).
 
-- :func:`log_alpha_prior`: P(θ) = w · scale · mean_j ln(α_j / α_ref)²  with α_ref = 1/M (the
-  paper's initial α; the default style's), ``scale`` the NIO objective at θ0 so that w is
+- :func:`log_alpha_prior`: P(θ) = w · scale · mean_j ln(α_j / α_ref,j)²  with α_ref of
+  :func:`alpha_reference` (default 1/M, the paper's initial α), ``scale`` the NIO objective at θ0 so that w is
   unitless (w = 1: every α an e-fold off costs as much as the initial G).  Its gradient is
   exact; the bundle method adds its linearisation to the LP and accepts a step on the true
   G + D + P.
@@ -16,7 +16,8 @@ from 16_18's straight part have α = 0 at hip_flex and waist_flex).
   DOF pair (q_rest stays per side: the sign conventions of the lateral DOFs differ between
   sides); "groups" also ties α within each joint group of :data:`ALPHA_GROUPS`; "coarse" ties α
   *and* the springs (ks1, ks2, kd) within each group (147 → 59 free numbers: 7 α, 21 springs,
-  29 rest angles, the shoe's 2).
+  29 rest angles, the shoe's 2).  Ties within a group hold ratios given by :func:`tie_scales`
+  (θ_i / w_i = θ_j / w_j), left/right ties are equalities.
 - :func:`alpha_reference`: the prior's centre α_ref — "uniform" (1/M, the paper's initial α) or
   "strength" (α_ref,j ∝ 1/τ_j², τ_j a reference joint strength: Σ_j α_j τ_j² then measures
   effort as Σ (τ_j / τ_ref,j)², the normalised-effort form of the motor-control literature,
