@@ -27,7 +27,8 @@ The package, in the order of the computation (each module imports only those abo
 - :mod:`.resynthesis`: the example poses a style carries and the paper's re-synthesis check;
 - :mod:`.learn`: ``learn_style`` / ``learn_multi``, the whole loop with the learned style's provenance.
 - :mod:`.heldout`: measures of a prediction against a real trial (issue #18);
-- :mod:`.sensitivity`: dX*/dθ at a synthesis by the implicit-function theorem (issue #18).
+- :mod:`.sensitivity`: dX*/dθ at a synthesis by the implicit-function theorem (issue #18);
+- :mod:`.ranking`: E(real held-out trial) against E(flailing syntheses) under a θ, split by part (issue #18).
 
 Measured (local counterexamples): synthetic G 9.0e-4 → 1.7e-5 (54×) with the springs
 recovered but not α; 07_01 G 1.09 → 0.030 in 121 iterations (~200 s).  What it does not

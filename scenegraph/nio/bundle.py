@@ -16,7 +16,7 @@ import numpy as np
 
 from scenegraph.model.motion import Motion
 from scenegraph.nio.multi import MultiNIO
-from scenegraph.nio.prior import ALPHA_MIN, log_alpha_prior, tie_average
+from scenegraph.nio.prior import ALPHA_MIN, Prior, tie_average
 from scenegraph.nio.records import History, IterationRecord, NIOResult, Problem
 from scenegraph.nio.theta import ALPHA, project, style_from_theta, theta_bounds, theta_scales
 
@@ -31,9 +31,10 @@ def cut(nio: Problem, theta: np.ndarray, motion: Motion, ET: float, gT: np.ndarr
 
 
 def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray, alpha_floor: float = 0.0,
-               ties=(), lin: tuple[float, np.ndarray] | None = None, groups=None):
+               ties=(), lin: tuple[float, np.ndarray] | None = None, groups=None, tie_w: np.ndarray | None = None):
     """argmin over δ of Σ_c max(0, max_{i ∈ c} L_i + g_i·δ) [+ P0 + gP·δ] + μ Σ|δ/s| subject to
-    Σα = 1, the Style bounds (α ≥ ``alpha_floor``), δ_i = δ_j for every pair of ``ties`` and the
+    Σα = 1, the Style bounds (α ≥ ``alpha_floor``), δ_i / w_i = δ_j / w_j for every pair of ``ties``
+    (``tie_w``: the tie scales w, default 1, :func:`.prior.tie_scales`) and the
     trust box |δ_j| ≤ radius·s_j (an LP with one epigraph variable per group).  ``groups``: the
     clip index c of every cut (default: one clip, :mod:`.multi`); ``lin`` (P0, gP): a prior's
     value and gradient at θ (:mod:`.prior`), added linearised.  Returns (θ + δ, model value)."""
@@ -66,7 +67,7 @@ def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray,
     b_eq = [1.0 - theta[ALPHA].sum()]
     for i, j in ties:
         row = np.zeros(2 * n + ng)
-        row[i], row[j] = 1.0, -1.0
+        row[i], row[j] = (1.0, -1.0) if tie_w is None else (1.0 / tie_w[i], -1.0 / tie_w[j])
         A_eq.append(row)
         b_eq.append(0.0)
     A_eq = np.array(A_eq)
@@ -91,7 +92,9 @@ def _per_clip(seeds, n: int) -> list[list[Motion]]:
 def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: float = 0.02, patience: int = 3,
                g_abs: float = 1e-3, trust: float = 0.03, min_trust: float = 1e-3, max_trust: float = 4.0,
                max_cuts: int = 40, max_tries: int = 4, callback: Callable[[IterationRecord], None] | None = None,
-               seeds=(), prior_weight: float = 0.0, ties=()) -> NIOResult:
+               seeds=(), prior_weight: float = 0.0, ties=(), alpha_ref: np.ndarray | None = None,
+               spring_weight: float = 0.0, spring_ref: np.ndarray | None = None,
+               tie_w: np.ndarray | None = None) -> NIOResult:
     """Minimise Σ_c G_c + D (+ P) from θ0 by the bundle method.
 
     ``nio``: a :class:`.multi.MultiNIO` (several clips) or one NIO problem (run as the
@@ -101,7 +104,10 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
     ``prior_weight`` w > 0 adds the log-normal prior on α of :func:`.prior.log_alpha_prior`
     (scaled by G + D at θ0, linearised in each LP, the true value in every comparison; α ≥
     :data:`.prior.ALPHA_MIN` keeps its log finite); ``ties`` (θ index pairs, :func:`.prior.tie_pairs`)
-    are held equal (θ0 averaged over each tied set first).
+    are held equal (θ0 averaged over each tied set first; with ``tie_w`` the ratios θ_i / w_i).
+    ``alpha_ref``: the α prior's centre (default 1/M, :func:`.prior.alpha_reference`);
+    ``spring_weight`` > 0 adds the quadratic prior on the springs around those of ``spring_ref``
+    (default θ0; :func:`.prior.spring_prior`), in the same units as the α prior.
 
     The trial θ gets its own counterexample per clip (``NIO.evaluate``: a spacetime solve
     warm-started from the best known motion, or the local step), which is added to that
@@ -127,18 +133,18 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
     th[ALPHA] = a / a.sum()
     ties = list(ties)
     if ties:
-        th = tie_average(th, ties)
+        th = tie_average(th, ties, tie_w)
     floor = max(prob.alpha_floor, ALPHA_MIN) if prior_weight > 0 else prob.alpha_floor
     if prior_weight > 0:
         th[ALPHA] = np.maximum(th[ALPHA], floor)
         th[ALPHA] /= th[ALPHA].sum()
     scales = theta_scales(style_from_theta(th))
+    k_ref = th.copy() if spring_ref is None else np.asarray(spring_ref, float)
     bundle = _per_clip(seeds, nc)
     cur = first = prob.evaluate(th, bundle)
     p_scale = max(cur.G + cur.D, 1e-12)
 
-    def P(theta):
-        return log_alpha_prior(theta, prior_weight, p_scale)
+    P = Prior(p_scale, prior_weight, alpha_ref, spring_weight, k_ref, scales)
 
     def extra(e):  # D + P of an evaluation
         return e.D + P(e.theta)[0]
@@ -181,7 +187,7 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
         accepted = False
         while r >= min_trust and tries < max_tries:
             th_new, model = model_step(cur.theta, cuts, r, scales, floor, ties,
-                                       P(cur.theta) if prior_weight > 0 else None, groups)
+                                       P(cur.theta) if P.active else None, groups, tie_w)
             pred = prev - model
             if pred <= 1e-12 * max(prev, 1e-300):
                 r *= 0.5

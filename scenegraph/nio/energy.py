@@ -209,6 +209,18 @@ class EnergyModel:
         g[ALPHA] = np.bincount(self._joint[m], weights=r1[m] ** 2, minlength=N_JOINT)
         return float(E), g
 
+    def parts(self, theta: np.ndarray, motion: Motion, lam: np.ndarray) -> dict[str, float]:
+        """E(X; θ) at contact coefficients ``lam`` split into ``muscle`` (Σ α_j Q_mj², the joint
+        rows of ρ_dyn), ``root`` (the root-residual rows of ρ_dyn) and ``other`` (the rest of
+        the objective: the λ regularisation and any other term)."""
+        x = self.x_of(motion, lam)
+        E = float(self._f_fn(x, nlp_params(self.nlp, theta, motion))[0])
+        r = np.asarray(self._rho_fn(x, nlp_params(self.nlp, theta, motion))).ravel()
+        n_dyn = int(self.nlp.rho_dyn_fn.size1_out(0))
+        muscle = float(np.sum(r[:n_dyn][self._joint[:n_dyn] >= 0] ** 2))
+        root = float(np.sum(r[:n_dyn][self._joint[:n_dyn] < 0] ** 2))
+        return {"muscle": muscle, "root": root, "other": E - muscle - root}
+
     def measure(self, theta: np.ndarray, motion: Motion):
         """(E, ∂E/∂θ, F, λ) of ``motion`` under θ with its energy-optimal contact forces."""
         F, lam = self.forces(motion, theta)

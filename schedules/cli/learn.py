@@ -258,6 +258,10 @@ def _option_flags(prov: dict) -> str:
         flags += f" --alpha-floor {prov['alpha_floor'] * N_JOINT:g}"
     if prov.get("alpha_prior"):
         flags += f" --alpha-prior {prov['alpha_prior']:g}"
+    if prov.get("alpha_ref"):
+        flags += f" --alpha-ref {prov['alpha_ref']}"
+    if prov.get("spring_prior"):
+        flags += f" --spring-prior {prov['spring_prior']:g}"
     if prov.get("tie"):
         flags += f" --tie {prov['tie']}"
     if prov.get("contacts"):
@@ -309,6 +313,10 @@ def _cmd_learn(args) -> int:
     # every argument is checked before the clips are read and NIO runs for minutes
     if args.alpha_prior < 0:
         raise InputError(f"--alpha-prior {args.alpha_prior}: must be >= 0")
+    if args.spring_prior < 0:
+        raise InputError(f"--spring-prior {args.spring_prior}: must be >= 0")
+    if args.alpha_ref != "uniform" and args.alpha_prior == 0 and args.tie == "none":
+        raise InputError(f"--alpha-ref {args.alpha_ref}: has an effect only with --alpha-prior W > 0 or a --tie")
     if not 0.0 <= args.alpha_floor <= 1.0:
         raise InputError(f"--alpha-floor {args.alpha_floor}: must lie in [0, 1] (units of 1/M; Σα = 1)")
     if args.max_iter < 1:
@@ -335,7 +343,8 @@ def _cmd_learn(args) -> int:
         res, _ = learn_from_clips(specs, args.body, args.output, progress=progress,
                                 max_iter=args.max_iter, local=args.counterexamples == "local",
                                 hessian=args.hessian, alpha_floor=args.alpha_floor / N_JOINT,
-                                prior_weight=args.alpha_prior, tie=args.tie, onesided=args.contacts == "onesided")
+                                prior_weight=args.alpha_prior, tie=args.tie, alpha_ref=args.alpha_ref,
+                                spring_prior=args.spring_prior, onesided=args.contacts == "onesided")
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -366,9 +375,16 @@ def register(sub) -> None:
                    help="every muscle weight alpha_j >= F/M (default 0: a muscle may cost nothing)")
     p.add_argument("--alpha-prior", type=float, default=0.0, metavar="W",
                    help="log-normal prior on alpha around 1/M, weight W in units of the initial G (default 0: none)")
-    p.add_argument("--tie", choices=("none", "lr", "groups"), default="none",
+    p.add_argument("--alpha-ref", choices=("uniform", "strength"), default="uniform",
+                   help="centre of the alpha prior and initial alpha: uniform 1/M (default) or strength "
+                        "(proportional to 1/strength^2 of each joint)")
+    p.add_argument("--spring-prior", type=float, default=0.0, metavar="W",
+                   help="quadratic prior on the springs around their Eq. 22 values, weight W in units of the "
+                        "initial G (default 0: none)")
+    p.add_argument("--tie", choices=("none", "lr", "groups", "coarse"), default="none",
                    help="hold equal: lr = alpha and springs of left/right DOF pairs; groups = lr plus one alpha per "
-                        "joint group (default none)")
+                        "joint group; coarse = groups plus one factor per group on the springs (59 free numbers) "
+                        "(default none)")
     p.add_argument("--contacts", choices=("central", "onesided"), default="central",
                    help="contact detection on the clip: central speed differences (default; the shipped styles), or "
                         "one-sided speeds widened by half a frame (what evaluate-style uses)")

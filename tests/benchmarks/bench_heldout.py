@@ -1,7 +1,8 @@
 """Benchmark: does a learned style predict the same person's other performances? (issue #18)
 
     python tests/benchmarks/bench_heldout.py [--mocap DIR] [--out DIR] [--max-iter 300] [--learn-iter 200]
-                                             [--alpha-prior W] [--tie none|lr|groups]
+                                             [--alpha-prior W] [--alpha-ref uniform|strength]
+                                             [--spring-prior W] [--tie none|lr|groups|coarse]
                                              [--synth-tol TOL] [--hessian gauss_newton|exact] [--multi]
 
 Two validation trials, each learned and predicted here (nothing is read from the shipped styles):
@@ -67,7 +68,9 @@ def main() -> None:
     ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per synthesis")
     ap.add_argument("--learn-iter", type=int, default=200, help="NIO iteration limit")
     ap.add_argument("--alpha-prior", type=float, default=0.0, help="compose learn --alpha-prior (0: none)")
-    ap.add_argument("--tie", choices=("none", "lr", "groups"), default="none", help="compose learn --tie")
+    ap.add_argument("--alpha-ref", choices=("uniform", "strength"), default="uniform", help="compose learn --alpha-ref")
+    ap.add_argument("--spring-prior", type=float, default=0.0, help="compose learn --spring-prior (0: none)")
+    ap.add_argument("--tie", choices=("none", "lr", "groups", "coarse"), default="none", help="compose learn --tie")
     ap.add_argument("--synth-tol", type=float, default=1e-4,
                     help="IPOPT tolerance of the dynamic syntheses (evaluate-style --tol; default 1e-4)")
     ap.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
@@ -86,7 +89,7 @@ def main() -> None:
         specs = [(mocap / train, tframes)] + ([(mocap / train, SECOND[name])] if args.multi else [])
         res, _ = learn_from_clips(specs, "adult_male", style_path, name=f"heldout_{name}",
                                   onesided=True, max_iter=args.learn_iter, prior_weight=args.alpha_prior,
-                                  tie=args.tie)
+                                  tie=args.tie, alpha_ref=args.alpha_ref, spring_prior=args.spring_prior)
         learn_s.append(time.perf_counter() - t0)
         segs = " + ".join(f"{a}:{b}" for _, (a, b) in specs)
         print(f"{name}: learned from {train} {segs} in {learn_s[-1]:.1f} s "

@@ -223,7 +223,7 @@ def test_compose_schedule_does_not_import_casadi():
 # the order of the computation in scenegraph/nio/ (its __init__ docstring): each module may
 # import only the modules before it
 NIO_ORDER = ("plausibility", "theta", "prior", "energy", "counterexamples", "records", "multi", "initial", "bundle", "gradient", "problem",
-             "target", "resynthesis", "learn", "heldout", "sensitivity")
+             "target", "resynthesis", "learn", "heldout", "sensitivity", "ranking")
 
 
 def test_learning_is_on_top_of_the_model_and_ordered_inside():
