@@ -75,6 +75,7 @@ from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, 
                         kernel_hessian, theta_kernel_vector)
 from scenegraph.problem.flight import flight_constraints, flight_groups, flight_hessian, flight_jacobian
 from scenegraph.problem.gram import dynamics_gauss_newton
+from scenegraph.problem.jerk import jerk_rows
 from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
@@ -590,6 +591,10 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     if sp.dynamics == "kinematic":  # stay close to the initial motion; no dynamics at all
         rho_dyn = ca.vec(P_flat - P_fixed) * KIN_WEIGHT
     rho_extra = [1e-3 * xL]  # tiny λ regularisation keeps the contact split well posed
+    if sp.jerk_weight > 0 and sp.dynamics != "kinematic":  # no ringing between the points (.jerk)
+        rj = jerk_rows(ch, m, P, mask, sp.jerk_weight)
+        if rj is not None:
+            rho_extra.append(rj)
 
     def state_at(t):
         sk = float(m.to_canonical([t])[0])

@@ -1,0 +1,93 @@
+"""Knot-to-knot jerk penalty: the motion's splines do not ring between evaluation points.
+
+A cubic B-spline's third derivative q⃛ is constant on each knot interval and jumps at every
+knot; a motion whose acceleration zig-zags from knot to knot (the "ringing" measured on
+``springy_run`` and ``handhold``: joint accelerations changing sign at every knot, 32 ms, at
+1000+ rad/s²) has large jumps, a smooth one small jumps.  Because the dense transcription
+evaluates the residual only at nodes and node-interval midpoints, the solver can zero it there
+while the ringing leaves ±3–4 N·m of root moment between the points (docs/results.md).
+
+The term, per DOF j and interior knot i (world time t, world knot spacing h_i = T'(s_i)/n_int):
+
+    kink force   F_ij = M_jj · Δq⃛_j(t_i) · h_i        (N for root translations, N·m otherwise)
+    energy       E_jerk = w Σ_i h_i Σ_j F_ij²           (N²·s, like the style energy Σ w_k T' α Q²)
+
+i.e. the generalised force the jump of the jerk amounts to over one knot interval (the
+acceleration one interval's worth of that jump adds, times the DOF's own inertia M_jj — the
+mass-matrix diagonal at a reference pose), integrated over time like the energy with a
+dimensionless weight ``w`` (the style weights α are 0–0.24, W_ROOT is 100).  The residual rows
+returned are sqrt(w h_i) F_ij / (m g) (body weights·√s, the normalisation of the transcription's
+other least-squares rows, which multiplies them by OBJ_SCALE).  They are linear in the control
+points; the warp slope T' is taken from the motion as given (held during the solve: a free
+timewarp changes the world jerk only through it).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from scenegraph.model.body import G, N_DOF, Character
+from scenegraph.model.dynamics import mass_matrix
+from scenegraph.model.motion import Motion, basis
+
+__all__ = ["JERK_WEIGHT", "knot_jump_matrix", "dof_inertia", "jerk_rows", "jerk_energy"]
+
+JERK_WEIGHT = 0.0  # dimensionless weight w of E_jerk (0: off); measured in docs/results.md
+
+
+def knot_jump_matrix(n_ctrl: int) -> tuple[np.ndarray, np.ndarray]:
+    """(J, s_knots): J (n_int − 1, n_ctrl) with (J @ ctrl)[i] the jump of d³q/ds³ at interior knot
+    ``s_knots[i]`` (canonical s; right interval's value minus left's) of a clamped uniform cubic
+    spline with ``n_ctrl`` control points (n_int = n_ctrl − 3 knot intervals)."""
+    n_int = n_ctrl - 3
+    if n_int < 2:
+        return np.zeros((0, n_ctrl)), np.zeros(0)
+    edges = np.linspace(0.0, 1.0, n_int + 1)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    B3 = basis(n_ctrl, mid, 3)  # q⃛ in s: constant on each interval
+    return B3[1:] - B3[:-1], edges[1:-1]
+
+
+def dof_inertia(ch: Character, q: np.ndarray) -> np.ndarray:
+    """Diagonal of the joint-space mass matrix M(q) (35,: kg for root translations, kg·m² for
+    rotations) at pose ``q`` (35, rad / m)."""
+    M = ca.evalf(mass_matrix(ch, ca.DM(np.asarray(q, float))))
+    return np.maximum(np.asarray(ca.diag(M)).ravel(), 1e-6)
+
+
+def jerk_rows(ch: Character, motion: Motion, P, mask: np.ndarray, weight: float):
+    """Residual rows (MX column) of E_jerk (module docstring) for the control points ``P`` (K × 35,
+    MX) at the interior knots whose jump a free control point (``mask``, K bools) moves; None when
+    ``weight`` ≤ 0 or no such knot.  The reference pose of M_jj is the motion's at s = 0.5."""
+    if weight <= 0 or not np.any(mask):
+        return None
+    K = motion.n_ctrl
+    J, s_k = knot_jump_matrix(K)
+    live = np.abs(J[:, mask]).sum(axis=1) > 0
+    if not live.any():
+        return None
+    J, s_k = J[live], s_k[live]
+    n_int = K - 3
+    t1 = basis(len(motion.warp), s_k, 1) @ np.asarray(motion.warp, float)  # T' (world s per unit s)
+    h = t1 / n_int  # world knot spacing (s)
+    q_ref = np.asarray(motion.state_at_s(np.array([0.5]))[0], float).reshape(-1)[:N_DOF]
+    m_jj = dof_inertia(ch, q_ref)
+    # F_ij = M_jj Δ(d³q/ds³)/T'³ h; row = sqrt(w h) F / (m g)
+    row_scale = np.sqrt(weight * h) * h / t1 ** 3 / (ch.total_mass * G)  # (n_live,)
+    Jw = J * row_scale[:, None]
+    jumps = ca.mtimes(ca.DM(Jw), P)  # (n_live, 35): jumps in s, scaled per knot
+    return ca.vec(jumps * ca.repmat(ca.DM(m_jj).T, Jw.shape[0], 1))
+
+
+def jerk_energy(ch: Character, motion: Motion, weight: float = 1.0) -> float:
+    """E_jerk (N²·s, module docstring) of a numeric ``motion`` over all its interior knots:
+    the unnormalised value of the rows of :func:`jerk_rows` (a diagnostic, and the tests' check)."""
+    K = motion.n_ctrl
+    J, s_k = knot_jump_matrix(K)
+    if not len(s_k):
+        return 0.0
+    t1 = basis(len(motion.warp), s_k, 1) @ np.asarray(motion.warp, float)
+    h = t1 / (K - 3)
+    q_ref = np.asarray(motion.state_at_s(np.array([0.5]))[0], float).reshape(-1)[:N_DOF]
+    F = (J @ np.asarray(motion.ctrl, float)) / (t1 ** 3)[:, None] * h[:, None] * dof_inertia(ch, q_ref)[None, :]
+    return float(weight * np.sum(h[:, None] * F ** 2))
