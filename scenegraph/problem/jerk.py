@@ -9,13 +9,15 @@ while the ringing leaves ±3–4 N·m of root moment between the points (docs/re
 
 The term, per DOF j and interior knot i (world time t, world knot spacing h_i = T'(s_i)/n_int):
 
-    kink force   F_ij = M_jj · Δq⃛_j(t_i) · h_i        (N for root translations, N·m otherwise)
-    energy       E_jerk = w Σ_i h_i Σ_j F_ij²           (N²·s, like the style energy Σ w_k T' α Q²)
+    kink force   F_ij = M_jj · Δq⃛_j(t_i) · h_i        (N·m; j one of the 29 joint DOFs)
+    energy       E_jerk = w Σ_i h_i Σ_j F_ij²           (N²·m²·s, like the style energy Σ w_k T' α Q²)
 
 i.e. the generalised force the jump of the jerk amounts to over one knot interval (the
 acceleration one interval's worth of that jump adds, times the DOF's own inertia M_jj — the
 mass-matrix diagonal at a reference pose), integrated over time like the energy with a
-dimensionless weight ``w`` (the style weights α are 0–0.24, W_ROOT is 100).  The residual rows
+dimensionless weight ``w`` (the style weights α are 0–0.24, W_ROOT is 100).  Only the joints
+(the muscles' DOFs): the root has no actuator, its acceleration is what the external forces make
+it, and those legitimately kink at every touch-down (a run's root: kinks of 20–70 m/s² per knot).  The residual rows
 returned are sqrt(w h_i) F_ij / (m g) (body weights·√s, the normalisation of the transcription's
 other least-squares rows, which multiplies them by OBJ_SCALE).  They are linear in the control
 points; the warp slope T' is taken from the motion as given (held during the solve: a free
@@ -26,7 +28,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from scenegraph.model.body import G, N_DOF, Character
+from scenegraph.model.body import G, N_DOF, N_ROOT, Character
 from scenegraph.model.dynamics import mass_matrix
 from scenegraph.model.motion import Motion, basis
 
@@ -75,8 +77,8 @@ def jerk_rows(ch: Character, motion: Motion, P, mask: np.ndarray, weight: float)
     # F_ij = M_jj Δ(d³q/ds³)/T'³ h; row = sqrt(w h) F / (m g)
     row_scale = np.sqrt(weight * h) * h / t1 ** 3 / (ch.total_mass * G)  # (n_live,)
     Jw = J * row_scale[:, None]
-    jumps = ca.mtimes(ca.DM(Jw), P)  # (n_live, 35): jumps in s, scaled per knot
-    return ca.vec(jumps * ca.repmat(ca.DM(m_jj).T, Jw.shape[0], 1))
+    jumps = ca.mtimes(ca.DM(Jw), P[:, N_ROOT:])  # (n_live, 29): the joints' jumps in s, scaled per knot
+    return ca.vec(jumps * ca.repmat(ca.DM(m_jj[N_ROOT:]).T, Jw.shape[0], 1))
 
 
 def jerk_energy(ch: Character, motion: Motion, weight: float = 1.0) -> float:
@@ -89,5 +91,6 @@ def jerk_energy(ch: Character, motion: Motion, weight: float = 1.0) -> float:
     t1 = basis(len(motion.warp), s_k, 1) @ np.asarray(motion.warp, float)
     h = t1 / (K - 3)
     q_ref = np.asarray(motion.state_at_s(np.array([0.5]))[0], float).reshape(-1)[:N_DOF]
-    F = (J @ np.asarray(motion.ctrl, float)) / (t1 ** 3)[:, None] * h[:, None] * dof_inertia(ch, q_ref)[None, :]
+    F = (J @ np.asarray(motion.ctrl, float)[:, N_ROOT:]) / (t1 ** 3)[:, None] * h[:, None] \
+        * dof_inertia(ch, q_ref)[None, N_ROOT:]
     return float(weight * np.sum(h[:, None] * F ** 2))
