@@ -34,7 +34,7 @@ from scenegraph.model.motion import Motion, basis
 
 __all__ = ["JERK_WEIGHT", "knot_jump_matrix", "dof_inertia", "jerk_rows", "jerk_energy"]
 
-JERK_WEIGHT = 0.0  # dimensionless weight w of E_jerk (0: off); measured in docs/results.md
+JERK_WEIGHT = 1e-4  # dimensionless weight w of E_jerk (0: off); measured in docs/results.md
 
 
 def knot_jump_matrix(n_ctrl: int) -> tuple[np.ndarray, np.ndarray]:

@@ -123,6 +123,9 @@ class Subproblem:
     no_slip_weight: float = 0.0  # s/m²: foot handles near the floor do not move horizontally
     # (scenegraph/problem/no_slip.py; 0: off; full dynamics only)
     contact_hz: float = 120.0  # samples per second of those two terms (world s of the initial motion)
+    root_tolerance: tuple[float, float] | None = None  # hard root rows at every evaluation point outside
+    # flights (full dynamics): |root force| ≤ [0] body weights and |root moment| ≤ [1] N·m per component
+    # ((0, 0): equalities); None: the root residual only in the objective (W_ROOT)
     jerk_weight: float = 0.0  # dimensionless: the knot-to-knot jump of the jerk as a generalised force,
     # integrated over time (scenegraph/problem/jerk.py; 0: off; full and relaxed dynamics)
     window_only: bool = False  # transcribe only the collocation points the window's free control

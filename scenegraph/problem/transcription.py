@@ -603,6 +603,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         return ca.mtimes(b0, P).T, ca.mtimes(b1, P).T / t1, sk
 
     g, lbg, ubg, groups = [], [], [], []
+    mx_rows = {}  # group name -> (rows, Jacobian thunk): constraint rows kept MX, out of the SX expansion
 
     def add(name, expr, lo, hi, kind="eq"):
         expr = ca.vec(expr)
@@ -650,9 +651,20 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         fc = flight_constraints(ch, fgroups, Q, Qd, T_s)
         if fc is not None:
             add("flight_momentum", fc, 0.0, 0.0)
-            flight_rows = fc
-            flight_jac = (lambda fgroups=fgroups, T_s=T_s: flight_jacobian(ch, fgroups, Q, Qd, T_s, x))
+            mx_rows["flight_momentum"] = (fc, lambda fgroups=fgroups, T_s=T_s: flight_jacobian(ch, fgroups, Q, Qd, T_s, x))
             flight_hess = (lambda lam, fgroups=fgroups: flight_hessian(ch, fgroups, Q, Qd, lam, x))
+    if sp.root_tolerance is not None and sp.dynamics == "full":  # hard root rows (Subproblem.root_tolerance)
+        dep = _depend_on_free(K, s_ev, mask, warp_free)
+        if sp.flights and sp.flight_mode == "momentum":
+            dep &= ~flight_points(sp, s_ev)  # the flight's momentum rows hold there
+        idx = np.flatnonzero(dep).tolist()
+        if idx:
+            tol_f, tol_m = sp.root_tolerance
+            R = QQ[N_JOINT:, idx]
+            rows = ca.vec(ca.vertcat(R[:3, :] / mg, R[3:, :]))  # per point: force (bw), moment (N m)
+            tol = np.tile(np.r_[np.full(3, tol_f), np.full(3, tol_m)], len(idx))
+            add("root_residual", rows, -tol, tol, "eq" if not np.any(tol > 0) else "ineq")
+            mx_rows["root_residual"] = (rows, lambda rows=rows: ca.jacobian(rows, x))
     # footsteps: planted handles at their footprint on the ground
     if pins:
         s_pin = np.array([pn[1] for pn in pins])
@@ -797,10 +809,16 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         # forward kinematics at every flight point made the SX Jacobian of g 38 s of broad_jump's 75 s
         # build; CasADi differentiates the (SX) momenta function once and maps it instead.  They get
         # no curvature in the Hessian (Gauss–Newton in them, as before).
+        # The hard root rows (compiled kernel: cannot be expanded) are kept MX the same way, Gauss–Newton too.
         is_fl = np.zeros(gg.shape[0], bool)
+        fl_only = np.zeros(gg.shape[0], bool)
+        mx_order = []
         for name, sl, _ in groups:
-            if name == "flight_momentum":
+            if name in mx_rows:
                 is_fl[sl] = True
+                mx_order.append(name)
+                if name == "flight_momentum":
+                    fl_only[sl] = True
         rest, frows = np.flatnonzero(~is_fl).tolist(), np.flatnonzero(is_fl).tolist()
         g_rest = gg[rest] if frows else gg
         gs = ca.Function("g_all", [x, p], [g_rest]).expand()(xs, ps)
@@ -813,8 +831,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         H = 2 * lam_f * (JtJ_dyn + ca.mtimes(J_x.T, J_x))
         if sp.hessian != "gauss_newton_objective":
             H = H + Hc
-            if frows and sp.flight_curvature:  # the flight rows' curvature (.flight)
-                H = H + flight_hess(lam_g[frows])
+            if fl_only.any() and sp.flight_curvature:  # the flight rows' curvature (.flight)
+                H = H + flight_hess(lam_g[np.flatnonzero(fl_only).tolist()])
         if sp.hessian == "exact":
             # second-order term 2 Σ r ∇²r of Σ r² (times lam_f).  Dynamics: r = C ⊙ Q(z) per point with
             # z = (q, q̇, q̈, forces); with the timewarp held, C is constant and z linear in x, so the
@@ -839,8 +857,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         if frows:  # the SX rows and the MX flight rows, put back in g's order
             g_r, J_r = ca.Function("jac_g_rest", [xs, ps], [gs, ca.jacobian(gs, xs)])(x, p)
             back = ca.DM(ca.Sparsity.triplet(gg.shape[0], gg.shape[0], rest + frows, list(range(gg.shape[0]))), 1.0)
-            jac_g = ca.Function("nlp_jac_g", [x, p], [ca.mtimes(back, ca.vertcat(g_r, flight_rows)),
-                                                      ca.mtimes(back, ca.vertcat(J_r, flight_jac()))],
+            jac_g = ca.Function("nlp_jac_g", [x, p], [ca.mtimes(back, ca.vertcat(g_r, *[mx_rows[n][0] for n in mx_order])),
+                                                      ca.mtimes(back, ca.vertcat(J_r, *[mx_rows[n][1]() for n in mx_order]))],
                                 ["x", "p"], ["g", "jac_g_x"])
         else:
             jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])
