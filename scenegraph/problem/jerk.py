@@ -9,12 +9,14 @@ while the ringing leaves ±3–4 N·m of root moment between the points (docs/re
 
 The term, per DOF j and interior knot i (world time t, world knot spacing h_i = T'(s_i)/n_int):
 
-    kink force   F_ij = M_jj · Δq⃛_j(t_i) · h_i        (N·m; j one of the 29 joint DOFs)
+    kink force   F_ij = M_j · Δq⃛_j(t_i) · h_i         (N·m; j one of the 29 joint DOFs)
     energy       E_jerk = w Σ_i h_i Σ_j F_ij²           (N²·m²·s, like the style energy Σ w_k T' α Q²)
 
 i.e. the generalised force the jump of the jerk amounts to over one knot interval (the
-acceleration one interval's worth of that jump adds, times the DOF's own inertia M_jj — the
-mass-matrix diagonal at a reference pose), integrated over time like the energy with a
+acceleration one interval's worth of that jump adds, times the DOF's inertia M_j: the norm of
+the mass matrix's entries that couple it to itself and to the root, at a reference pose — the
+generalised force that acceleration needs at the joint and leaks into the root residual, which
+is what the ringing does between evaluation points), integrated over time like the energy with a
 dimensionless weight ``w`` (the style weights α are 0–0.24, W_ROOT is 100).  Only the joints
 (the muscles' DOFs): the root has no actuator, its acceleration is what the external forces make
 it, and those legitimately kink at every touch-down (a run's root: kinks of 20–70 m/s² per knot).  The residual rows
@@ -34,7 +36,7 @@ from scenegraph.model.motion import Motion, basis
 
 __all__ = ["JERK_WEIGHT", "knot_jump_matrix", "dof_inertia", "jerk_rows", "jerk_energy"]
 
-JERK_WEIGHT = 1e-4  # dimensionless weight w of E_jerk (0: off); measured in docs/results.md
+JERK_WEIGHT = 0.0  # dimensionless weight w of E_jerk (0: off); measured in docs/results.md
 
 
 def knot_jump_matrix(n_ctrl: int) -> tuple[np.ndarray, np.ndarray]:
@@ -51,16 +53,19 @@ def knot_jump_matrix(n_ctrl: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def dof_inertia(ch: Character, q: np.ndarray) -> np.ndarray:
-    """Diagonal of the joint-space mass matrix M(q) (35,: kg for root translations, kg·m² for
-    rotations) at pose ``q`` (35, rad / m)."""
-    M = ca.evalf(mass_matrix(ch, ca.DM(np.asarray(q, float))))
-    return np.maximum(np.asarray(ca.diag(M)).ravel(), 1e-6)
+    """Per DOF j, the generalised force a unit acceleration of j alone needs on itself and on
+    the root: ‖(M_jj, M_rj for the 6 root DOFs r)‖ of the joint-space mass matrix M(q) at pose
+    ``q`` (35, rad / m) — kg·m² (kg·m for the root forces) per DOF; the root DOFs' own entries
+    too (kg and kg·m²), though the penalty leaves the root out."""
+    M = np.asarray(ca.evalf(mass_matrix(ch, ca.DM(np.asarray(q, float)))))
+    cols = np.sqrt(np.diag(M) ** 2 + np.sum(M[:N_ROOT, :] ** 2, axis=0) - np.r_[np.diag(M)[:N_ROOT] ** 2, np.zeros(N_DOF - N_ROOT)])
+    return np.maximum(cols, 1e-6)
 
 
 def jerk_rows(ch: Character, motion: Motion, P, mask: np.ndarray, weight: float):
     """Residual rows (MX column) of E_jerk (module docstring) for the control points ``P`` (K × 35,
     MX) at the interior knots whose jump a free control point (``mask``, K bools) moves; None when
-    ``weight`` ≤ 0 or no such knot.  The reference pose of M_jj is the motion's at s = 0.5."""
+    ``weight`` ≤ 0 or no such knot.  The reference pose of M_j is the motion's at s = 0.5."""
     if weight <= 0 or not np.any(mask):
         return None
     K = motion.n_ctrl

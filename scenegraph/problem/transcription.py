@@ -80,9 +80,10 @@ from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
+__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "ROOT_TOLERANCE", "OBJ_SCALE", "KIN_WEIGHT",
            "FREE_WEIGHT_MIN"]
 
+ROOT_TOLERANCE = None  # hard root rows in full steps (lowering), e.g. (0.002, 0.1): |force| ≤ 0.002 bw, |moment| ≤ 0.1 N m
 W_FLIGHT = 1e6  # root residual weight in flight stages (W_ROOT elsewhere): a jump's flight is ballistic
 OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
 KIN_WEIGHT = 3.0  # pull toward the initial motion in kinematic pre-solves

@@ -54,9 +54,13 @@ def test_a_cubic_in_time_costs_nothing_and_ringing_costs():
     assert e1 > 0 and np.isclose(e2, 4 * e1, rtol=1e-9)
 
 
-def test_inertia_of_the_root_translation_is_the_body_mass():
-    m = dof_inertia(CH, np.asarray(standing_pose(CH), float))
-    np.testing.assert_allclose(m[:3], CH.total_mass, rtol=1e-9)
+def test_joint_inertia_counts_what_the_joint_moves():
+    q = np.asarray(standing_pose(CH), float)
+    m = dof_inertia(CH, q)
+    from scenegraph.model.dynamics import mass_matrix
+    M = np.asarray(ca.evalf(mass_matrix(CH, ca.DM(q))))
+    np.testing.assert_allclose(np.diag(M)[:3], CH.total_mass, rtol=1e-9)  # the mass matrix itself
+    assert np.all(m[6:] >= np.diag(M)[6:])  # a joint's own inertia, and more: what it moves the root by
     i = {n: k for k, n in enumerate(DOF_NAMES)}
     for side in "lr":  # along an arm, each joint moves less of the body than the one above it
         assert m[i[f"shoulder_flex_{side}"]] > m[i[f"elbow_flex_{side}"]] > m[i[f"wrist_flex_{side}"]] > 0
