@@ -80,9 +80,10 @@ from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "ROOT_TOLERANCE", "OBJ_SCALE", "KIN_WEIGHT",
+__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "ROOT_TOLERANCE", "COP_BOUND", "OBJ_SCALE", "KIN_WEIGHT",
            "FREE_WEIGHT_MIN"]
 
+COP_BOUND = (0.005, 0.1)  # full steps (lowering): |root moment| ≤ 0.005 m · F_z + 0.1 N m at every point
 ROOT_TOLERANCE = None  # hard root rows in full steps (lowering), e.g. (0.002, 0.1): |force| ≤ 0.002 bw, |moment| ≤ 0.1 N m
 W_FLIGHT = 1e6  # root residual weight in flight stages (W_ROOT elsewhere): a jump's flight is ballistic
 OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
@@ -666,6 +667,19 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
             tol = np.tile(np.r_[np.full(3, tol_f), np.full(3, tol_m)], len(idx))
             add("root_residual", rows, -tol, tol, "eq" if not np.any(tol > 0) else "ineq")
             mx_rows["root_residual"] = (rows, lambda rows=rows: ca.jacobian(rows, x))
+    if sp.cop_bound is not None and sp.dynamics == "full":  # root moment within d·F_z (Subproblem.cop_bound)
+        dep = _depend_on_free(K, s_ev, mask, warp_free)
+        if sp.flights and sp.flight_mode == "momentum":
+            dep &= ~flight_points(sp, s_ev)
+        idx = np.flatnonzero(dep).tolist()
+        if idx:
+            d_cop, m0 = sp.cop_bound
+            fz = sum(Fc[3 * i + 2, idx] for i in range(len(FORCE_HANDLES)))  # (1, n): N, contact + shoe + springs
+            Mr = QQ[N_JOINT + 3:, idx]  # (3, n): root moment residual, N m
+            slack = ca.repmat(d_cop * fz + m0, 3, 1)
+            rows = ca.vec(ca.vertcat(slack - Mr, slack + Mr))
+            add("root_moment", rows, 0.0, np.inf, "ineq")
+            mx_rows["root_moment"] = (rows, lambda rows=rows: ca.jacobian(rows, x))
     # footsteps: planted handles at their footprint on the ground
     if pins:
         s_pin = np.array([pn[1] for pn in pins])

@@ -60,3 +60,16 @@ def test_root_rows_only_with_full_dynamics():
     sp = replace(_standing(), root_tolerance=(0.0, 0.0))
     for dyn in ("relaxed", "kinematic"):
         assert "root_residual" not in {n for n, _, _ in transcribe(replace(sp, dynamics=dyn), derivatives=False).groups}
+
+
+def test_cop_bound_rows_hold_the_moment_within_d_times_the_vertical_force():
+    sp = _standing()
+    nlp = transcribe(replace(sp, cop_bound=(0.005, 0.1)))
+    sl = {n: sl for n, sl, _ in nlp.groups}["root_moment"]
+    rows = np.asarray(nlp.g_fn(nlp.x0, nlp.p0)).ravel()[sl].reshape(-1, 2, 3)  # per point: slack − M, slack + M
+    slack, M = (rows[:, 0] + rows[:, 1]) / 2, (rows[:, 1] - rows[:, 0]) / 2
+    assert np.allclose(slack, slack[:, :1]) and slack.min() >= 0.1 - 1e-9  # F_z ≥ 0 (λ ≥ 0, friction pyramid)
+    assert np.abs(M).max() > 0.1
+    g_j, J = nlp.jac_g(nlp.x0, nlp.p0)
+    J_ad = ca.Function("J", [nlp.x, nlp.p], [ca.jacobian(nlp.g, nlp.x)])(nlp.x0, nlp.p0)
+    np.testing.assert_allclose(np.asarray(ca.DM(J)), np.asarray(ca.DM(J_ad)), atol=1e-9, rtol=1e-7)
