@@ -129,6 +129,8 @@ class Subproblem:
     cop_bound: tuple[float, float] | None = None  # (d m, m0 N·m): at every evaluation point outside flights
     # (full dynamics) each root moment residual |M| ≤ d·F_z + m0, F_z the vertical contact force there: the
     # centre of pressure within ~d of where the contact forces put it; None: the root only in the objective
+    cop_hz: float = 0.0  # > 0: the cop_bound also at points of this rate (world Hz) within 30 ms of every contact
+    # end (between the evaluation points, where the whole ground force is small; scenes without springs)
     jerk_weight: float = 0.0  # dimensionless: the knot-to-knot jump of the jerk as a generalised force,
     # integrated over time (scenegraph/problem/jerk.py; 0: off; full and relaxed dynamics)
     window_only: bool = False  # transcribe only the collocation points the window's free control

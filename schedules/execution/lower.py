@@ -198,7 +198,7 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
                     # no ringing between the evaluation points (issue 15): the jerk's knot-to-knot jumps
                     jerk_weight=JERK_WEIGHT if step.kind == FULL else 0.0,
                     root_tolerance=ROOT_TOLERANCE if step.kind == FULL else None,
-                    cop_bound=COP_BOUND if step.kind == FULL else None,
+                    cop_bound=COP_BOUND if step.kind == FULL else None, cop_hz=240.0,
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
                     # a dense grid too, as synthesize does for runs — between the 30 Hz points a
                     # toe dipped 11–15 mm (audit gate 10 mm)

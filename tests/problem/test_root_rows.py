@@ -73,3 +73,45 @@ def test_cop_bound_rows_hold_the_moment_within_d_times_the_vertical_force():
     g_j, J = nlp.jac_g(nlp.x0, nlp.p0)
     J_ad = ca.Function("J", [nlp.x, nlp.p], [ca.jacobian(nlp.g, nlp.x)])(nlp.x0, nlp.p0)
     np.testing.assert_allclose(np.asarray(ca.DM(J)), np.asarray(ca.DM(J_ad)), atol=1e-9, rtol=1e-7)
+
+
+def test_cop_bound_between_points_matches_the_independent_dense_residual():
+    """With ``cop_hz`` the bound also holds at 240 Hz points within 30 ms of each contact end (here
+    the left heel's lift-off and the other handles'); those rows equal d·F_z + m0 ∓ M with F_z and M computed
+    independently (scenegraph.model.dense_audit: node forces interpolated in s, the gated shoe, the
+    residual kernel) from the start's motion and contact forces."""
+    from scenegraph.model.dense_audit import force_at, kernel_theta, shoe_forces
+    from scenegraph.model.residual import FORCE_HANDLES, residual_kernel
+    sp = _standing()
+    l, r = sp.footsteps
+    sp = replace(sp, footsteps=(replace(l, heel=(0.0, 0.25)), r), cop_bound=(0.005, 0.1), cop_hz=240.0)
+    nlp = transcribe(sp, derivatives=False)
+    base = transcribe(replace(sp, cop_hz=0.0), derivatives=False)
+    sl, sl0 = ({n: g for n, g, _ in b.groups}["root_moment"] for b in (nlp, base))
+    n_x = ((sl.stop - sl.start) - (sl0.stop - sl0.start)) // 6
+    t = np.arange(0.0, 0.5, 1 / 240)[1:]
+    from scenegraph.model.footsteps import contact_points
+    ends = np.array([e for st in sp.footsteps for _, iv, _ in contact_points(CH, st) for e in iv if 0 < e < 0.5])
+    assert len(ends)
+    t = t[np.min(np.abs(t[:, None] - ends[None, :]), axis=1) <= 0.03]
+    s_ev = np.r_[nlp.s_points, 0.5 * (nlp.s_points[:-1] + nlp.s_points[1:])]
+    t = t[np.min(np.abs(sp.motion.to_canonical(t)[:, None] - s_ev[None, :]), axis=1) > 1e-6]
+    assert n_x == len(t) > 0
+    g = np.asarray(nlp.g_fn(nlp.x0, nlp.p0)).ravel()[sl][-6 * n_x:].reshape(n_x, 2, 3)
+    # the start's contact forces as the solver's samples: per planted (handle, node)
+    forces: dict = {}
+    tn = sp.motion.time(nlp.s_points)
+    for (h, k, xs), V in zip(nlp.contact_index, nlp.contact_basis):
+        f = CH.total_mass * G * V @ nlp.x0[xs]
+        forces.setdefault(h, ([], []))
+        forces[h][0].append(tn[k])
+        forces[h][1].append(f)
+    m = sp.motion
+    q, qd, qdd = m.state_at_s(m.to_canonical(t))
+    F = force_at(CH, m, sp.footsteps, forces, t) + shoe_forces(CH, STYLE, m, sp.footsteps, q, t)
+    th = np.tile(kernel_theta(STYLE, True)[:, None], (1, len(t)))
+    M = np.asarray(residual_kernel(CH).map(len(t))(q.T, qd.T, qdd.T, F, th))[-3:].T
+    fz = F.reshape(len(FORCE_HANDLES), 3, len(t))[:, 2, :].sum(0)
+    slack = 0.005 * fz + 0.1
+    np.testing.assert_allclose(g[:, 0], slack[:, None] - M, atol=1e-6 * max(1.0, np.abs(M).max()))
+    np.testing.assert_allclose(g[:, 1], slack[:, None] + M, atol=1e-6 * max(1.0, np.abs(M).max()))
