@@ -36,7 +36,8 @@ from scenegraph.model.motion import Motion, basis
 
 __all__ = ["JERK_WEIGHT", "knot_jump_matrix", "dof_inertia", "jerk_rows", "jerk_energy"]
 
-JERK_WEIGHT = 0.0  # dimensionless weight w of E_jerk (0: off); measured in docs/results.md
+JERK_WEIGHT = 1e-3  # w of E_jerk in full steps (lowering): handhold's flailing arms gone, overlap 0.56 -> 0.29 cm,
+# walk and walk_to_run measured (docs/results.md, round 13); 1e-4 with the joint's own inertia left the ringing
 
 
 def knot_jump_matrix(n_ctrl: int) -> tuple[np.ndarray, np.ndarray]:

@@ -114,10 +114,7 @@ def _with_stand_in_spring(sp: Subproblem, handle: str, times) -> Subproblem:
     if sp.dynamics != "full":
         raise ValueError("build_joint: both subproblems must have full dynamics")
     zeros = tuple((0.0, 0.0, 0.0) for _ in times)
-    # no hard root rows (Subproblem.root_tolerance) here: the combined constraints are taken from g_fn
-    # at p0, whose spring anchors are not the joint's coupling force; the root stays in the objective
-    return replace(sp, springs=(Spring(handle, tuple(times), zeros, JOINT_SPRING_K, name="joint"),),
-                   root_tolerance=None, cop_bound=None)
+    return replace(sp, springs=(Spring(handle, tuple(times), zeros, JOINT_SPRING_K, name="joint"),))
 
 
 def _interp_matrix(t_from: np.ndarray, t_to: np.ndarray) -> np.ndarray:

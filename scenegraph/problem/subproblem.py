@@ -123,14 +123,6 @@ class Subproblem:
     no_slip_weight: float = 0.0  # s/m²: foot handles near the floor do not move horizontally
     # (scenegraph/problem/no_slip.py; 0: off; full dynamics only)
     contact_hz: float = 120.0  # samples per second of those two terms (world s of the initial motion)
-    root_tolerance: tuple[float, float] | None = None  # hard root rows at every evaluation point outside
-    # flights (full dynamics): |root force| ≤ [0] body weights and |root moment| ≤ [1] N·m per component
-    # ((0, 0): equalities); None: the root residual only in the objective (W_ROOT)
-    cop_bound: tuple[float, float] | None = None  # (d m, m0 N·m): at every evaluation point outside flights
-    # (full dynamics) each root moment residual |M| ≤ d·F_z + m0, F_z the vertical contact force there: the
-    # centre of pressure within ~d of where the contact forces put it; None: the root only in the objective
-    cop_hz: float = 0.0  # > 0: the cop_bound also at points of this rate (world Hz) within 30 ms of every contact
-    # end (between the evaluation points, where the whole ground force is small; scenes without springs)
     jerk_weight: float = 0.0  # dimensionless: the knot-to-knot jump of the jerk as a generalised force,
     # integrated over time (scenegraph/problem/jerk.py; 0: off; full and relaxed dynamics)
     window_only: bool = False  # transcribe only the collocation points the window's free control

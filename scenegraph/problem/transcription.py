@@ -33,6 +33,11 @@ of motion must hold between the points too, not only at them:
   for a quadratic one — so the residual between nodes is what the solver minimises, and in a
   flight (``flights``) every evaluation point carries W_FLIGHT.
 
+Jerk penalty (``Subproblem.jerk_weight``, full steps; :mod:`.jerk`): the jump of every joint's
+third derivative at each knot, as the generalised force it amounts to, is a least-squares row — a
+cubic spline can otherwise zig-zag its acceleration from knot to knot (the arms flailing at 1000+
+rad/s² where the style makes their torques almost free).
+
 ``dense_dynamics=False`` gives the round-8 transcription (uniform points plus contact ends,
 forces only at the points, trapezoid weights), kept for comparison (tests/problem/
 test_dense_dynamics.py); the independent check is :mod:`scenegraph.model.dense_audit`.
@@ -80,11 +85,9 @@ from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
 
-__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "ROOT_TOLERANCE", "COP_BOUND", "OBJ_SCALE", "KIN_WEIGHT",
+__all__ = ["NLP", "transcribe", "window_mask", "flight_root_weights", "flight_points", "W_FLIGHT", "OBJ_SCALE", "KIN_WEIGHT",
            "FREE_WEIGHT_MIN"]
 
-COP_BOUND = None  # measured: (0.005, 0.1); full steps (lowering): |root moment| ≤ 0.005 m · F_z + 0.1 N m at every point
-ROOT_TOLERANCE = None  # hard root rows in full steps (lowering), e.g. (0.002, 0.1): |force| ≤ 0.002 bw, |moment| ≤ 0.1 N m
 W_FLIGHT = 1e6  # root residual weight in flight stages (W_ROOT elsewhere): a jump's flight is ballistic
 OBJ_SCALE = 30.0  # objective = (OBJ_SCALE / m g)² E: O(1–100) so IPOPT's tolerances mean something
 KIN_WEIGHT = 3.0  # pull toward the initial motion in kinematic pre-solves
@@ -356,68 +359,6 @@ def _dense_points(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return s_ev, w, M
 
 
-def _contact_end_points(sp: Subproblem, ch: Character, s_nodes: np.ndarray, hz: float, reach: float = 0.03) -> np.ndarray:
-    """Canonical times on a ``hz`` grid (world s of the motion) within ``reach`` s of a contact
-    handle's touch-down or lift-off, outside every flight and off the nodes ``s_nodes`` and their
-    midpoints (where the dense residual is already evaluated): where the whole ground force is
-    small, so a small root moment is a large centre-of-pressure offset."""
-    m = sp.motion
-    ends = [t for st in sp.footsteps for _, (ta, tb), _ in contact_points(ch, st, None, sp.ground)
-            for t in (ta, tb) if m.start < t < m.end]
-    if not ends:
-        return np.zeros(0)
-    t = np.arange(m.start, m.end, 1.0 / hz)[1:]
-    near = np.min(np.abs(t[:, None] - np.asarray(ends)[None, :]), axis=1) <= reach
-    for fa, fb in sp.flights:
-        near &= ~((t > fa - 1e-9) & (t < fb + 1e-9))
-    sx = np.asarray(m.to_canonical(t[near]), float)
-    ev = np.r_[s_nodes, 0.5 * (s_nodes[:-1] + s_nodes[1:])]
-    if len(sx):
-        sx = sx[np.min(np.abs(sx[:, None] - ev[None, :]), axis=1) > 1e-6]
-    return sx
-
-
-def _root_moment_at(sp: Subproblem, ch: Character, s_nodes, s_x, P, warp, Fc_nodes, TH, HP_fn, hk_names):
-    """(F_z (1, n) N, root moment residual (3, n) N m) at canonical times ``s_x``: the kernel with
-    the motion there, the node forces interpolated linearly in s (as between nodes), the gated shoe
-    and the style interpolated the same way (no springs: callers skip scenes with springs)."""
-    K, nW = sp.motion.n_ctrl, len(sp.motion.warp)
-    Mx = np.zeros((len(s_nodes), len(s_x)))
-    j = np.clip(np.searchsorted(s_nodes, s_x) - 1, 0, len(s_nodes) - 2)
-    a = (s_x - s_nodes[j]) / (s_nodes[j + 1] - s_nodes[j])
-    Mx[j, np.arange(len(s_x))] = 1 - a
-    Mx[j + 1, np.arange(len(s_x))] = a
-    Qx, Q1, Q2 = (ca.mtimes(_sparse(basis(K, s_x, d)), P).T for d in (0, 1, 2))
-    T1 = ca.mtimes(_sparse(basis(nW, s_x, 1)), warp).T
-    T2 = ca.mtimes(_sparse(basis(nW, s_x, 2)), warp).T
-    Qd = Q1 / ca.repmat(T1, N_DOF, 1)
-    Qdd = Q2 / ca.repmat(T1 ** 2, N_DOF, 1) - Q1 * ca.repmat(T2 / T1 ** 3, N_DOF, 1)
-    Fx = ca.mtimes(Fc_nodes, _sparse(Mx))
-    THx = ca.mtimes(TH, _sparse(Mx))
-    TH_k = THx
-    if sp.shoe_gate:
-        keep_rows = np.ones(N_THETA)
-        keep_rows[4 * N_JOINT] = 0.0
-        TH_k = THx * ca.repmat(ca.DM(keep_rows), 1, len(s_x))
-        m = sp.motion
-        gate = shoe_gate(ch, sp.footsteps, m.time(s_x), m.start, m.end, sp.ground)
-        HP = HP_fn.map(len(s_x))(Qx)
-        for i, side in enumerate(SIDES):
-            if not gate[i].any():
-                continue
-            jh = hk_names.index(f"heel_{side}")
-            z = HP[3 * jh + 2, :]
-            if not sp.ground.flat:
-                z = z - sp.ground.z(HP[3 * jh, :], HP[3 * jh + 1, :])
-            fz = ca.DM(gate[i]).T * shoe_force(z, THx[4 * N_JOINT, :], THx[4 * N_JOINT + 1, :])
-            place = np.zeros((3 * len(FORCE_HANDLES), 1))
-            place[3 * FORCE_HANDLES.index(f"heel_{side}") + 2, 0] = 1.0
-            Fx = Fx + ca.mtimes(_sparse(place), fz)
-    QQ = compiled_kernel(ch).map(len(s_x))(Qx, Qd, Qdd, Fx, TH_k)
-    fz = sum(Fx[3 * i + 2, :] for i in range(len(FORCE_HANDLES)))
-    return fz, QQ[N_JOINT + 3:, :]
-
-
 def _touches_free(n_ctrl: int, s: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Which canonical times ``s`` have a position, velocity or acceleration that depends on a
     free control point (``mask``) at all: the dynamics at the other times are constants."""
@@ -581,8 +522,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     for c, (handle, k, _, _) in enumerate(planted if n_lam else []):
         r0 = k * 3 * len(FORCE_HANDLES) + 3 * force_rows[handle]
         Fmap[r0:r0 + 3, 4 * c:4 * c + 4] = mg * Vc[c]
-    Fc_nodes = ca.reshape(ca.mtimes(_sparse(Fmap), xL), 3 * len(FORCE_HANDLES), N)
-    Fc = ca.mtimes(Fc_nodes, _sparse(Mev))  # piecewise linear in s between the nodes: (24, Ne)
+    Fc = ca.reshape(ca.mtimes(_sparse(Fmap), xL), 3 * len(FORCE_HANDLES), N)
+    Fc = ca.mtimes(Fc, _sparse(Mev))  # piecewise linear in s between the nodes: (24, Ne)
 
     # parameters: fixed data and per-point style
     TH = ca.MX.sym("theta", N_THETA, N)
@@ -667,7 +608,6 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         return ca.mtimes(b0, P).T, ca.mtimes(b1, P).T / t1, sk
 
     g, lbg, ubg, groups = [], [], [], []
-    mx_rows = {}  # group name -> (rows, Jacobian thunk): constraint rows kept MX, out of the SX expansion
 
     def add(name, expr, lo, hi, kind="eq"):
         expr = ca.vec(expr)
@@ -715,39 +655,9 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         fc = flight_constraints(ch, fgroups, Q, Qd, T_s)
         if fc is not None:
             add("flight_momentum", fc, 0.0, 0.0)
-            mx_rows["flight_momentum"] = (fc, lambda fgroups=fgroups, T_s=T_s: flight_jacobian(ch, fgroups, Q, Qd, T_s, x))
+            flight_rows = fc
+            flight_jac = (lambda fgroups=fgroups, T_s=T_s: flight_jacobian(ch, fgroups, Q, Qd, T_s, x))
             flight_hess = (lambda lam, fgroups=fgroups: flight_hessian(ch, fgroups, Q, Qd, lam, x))
-    if sp.root_tolerance is not None and sp.dynamics == "full":  # hard root rows (Subproblem.root_tolerance)
-        dep = _depend_on_free(K, s_ev, mask, warp_free)
-        if sp.flights and sp.flight_mode == "momentum":
-            dep &= ~flight_points(sp, s_ev)  # the flight's momentum rows hold there
-        idx = np.flatnonzero(dep).tolist()
-        if idx:
-            tol_f, tol_m = sp.root_tolerance
-            R = QQ[N_JOINT:, idx]
-            rows = ca.vec(ca.vertcat(R[:3, :] / mg, R[3:, :]))  # per point: force (bw), moment (N m)
-            tol = np.tile(np.r_[np.full(3, tol_f), np.full(3, tol_m)], len(idx))
-            add("root_residual", rows, -tol, tol, "eq" if not np.any(tol > 0) else "ineq")
-            mx_rows["root_residual"] = (rows, lambda rows=rows: ca.jacobian(rows, x))
-    if sp.cop_bound is not None and sp.dynamics == "full":  # root moment within d·F_z (Subproblem.cop_bound)
-        dep = _depend_on_free(K, s_ev, mask, warp_free)
-        if sp.flights and sp.flight_mode == "momentum":
-            dep &= ~flight_points(sp, s_ev)
-        idx = np.flatnonzero(dep).tolist()
-        if idx:
-            d_cop, m0 = sp.cop_bound
-            fz = sum(Fc[3 * i + 2, idx] for i in range(len(FORCE_HANDLES)))  # (1, n): N, contact + shoe + springs
-            Mr = QQ[N_JOINT + 3:, idx]  # (3, n): root moment residual, N m
-            slack = ca.repmat(d_cop * fz + m0, 3, 1)
-            rows = ca.vec(ca.vertcat(slack - Mr, slack + Mr))
-            s_x = _contact_end_points(sp, ch, s, sp.cop_hz) if sp.cop_hz > 0 and not sp.springs else np.zeros(0)
-            s_x = s_x[_depend_on_free(K, s_x, mask, warp_free)] if len(s_x) else s_x
-            if len(s_x):  # the same bound between the evaluation points, near every contact end
-                fz_x, M_x = _root_moment_at(sp, ch, s, s_x, P, warp, Fc_nodes, TH, HP_fn=hk, hk_names=hk_names)
-                slack_x = ca.repmat(d_cop * fz_x + m0, 3, 1)
-                rows = ca.vertcat(rows, ca.vec(ca.vertcat(slack_x - M_x, slack_x + M_x)))
-            add("root_moment", rows, 0.0, np.inf, "ineq")
-            mx_rows["root_moment"] = (rows, lambda rows=rows: ca.jacobian(rows, x))
     # footsteps: planted handles at their footprint on the ground
     if pins:
         s_pin = np.array([pn[1] for pn in pins])
@@ -892,16 +802,10 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         # forward kinematics at every flight point made the SX Jacobian of g 38 s of broad_jump's 75 s
         # build; CasADi differentiates the (SX) momenta function once and maps it instead.  They get
         # no curvature in the Hessian (Gauss–Newton in them, as before).
-        # The hard root rows (compiled kernel: cannot be expanded) are kept MX the same way, Gauss–Newton too.
         is_fl = np.zeros(gg.shape[0], bool)
-        fl_only = np.zeros(gg.shape[0], bool)
-        mx_order = []
         for name, sl, _ in groups:
-            if name in mx_rows:
+            if name == "flight_momentum":
                 is_fl[sl] = True
-                mx_order.append(name)
-                if name == "flight_momentum":
-                    fl_only[sl] = True
         rest, frows = np.flatnonzero(~is_fl).tolist(), np.flatnonzero(is_fl).tolist()
         g_rest = gg[rest] if frows else gg
         gs = ca.Function("g_all", [x, p], [g_rest]).expand()(xs, ps)
@@ -914,8 +818,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         H = 2 * lam_f * (JtJ_dyn + ca.mtimes(J_x.T, J_x))
         if sp.hessian != "gauss_newton_objective":
             H = H + Hc
-            if fl_only.any() and sp.flight_curvature:  # the flight rows' curvature (.flight)
-                H = H + flight_hess(lam_g[np.flatnonzero(fl_only).tolist()])
+            if frows and sp.flight_curvature:  # the flight rows' curvature (.flight)
+                H = H + flight_hess(lam_g[frows])
         if sp.hessian == "exact":
             # second-order term 2 Σ r ∇²r of Σ r² (times lam_f).  Dynamics: r = C ⊙ Q(z) per point with
             # z = (q, q̇, q̈, forces); with the timewarp held, C is constant and z linear in x, so the
@@ -940,8 +844,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         if frows:  # the SX rows and the MX flight rows, put back in g's order
             g_r, J_r = ca.Function("jac_g_rest", [xs, ps], [gs, ca.jacobian(gs, xs)])(x, p)
             back = ca.DM(ca.Sparsity.triplet(gg.shape[0], gg.shape[0], rest + frows, list(range(gg.shape[0]))), 1.0)
-            jac_g = ca.Function("nlp_jac_g", [x, p], [ca.mtimes(back, ca.vertcat(g_r, *[mx_rows[n][0] for n in mx_order])),
-                                                      ca.mtimes(back, ca.vertcat(J_r, *[mx_rows[n][1]() for n in mx_order]))],
+            jac_g = ca.Function("nlp_jac_g", [x, p], [ca.mtimes(back, ca.vertcat(g_r, flight_rows)),
+                                                      ca.mtimes(back, ca.vertcat(J_r, flight_jac()))],
                                 ["x", "p"], ["g", "jac_g_x"])
         else:
             jac_g = ca.Function("nlp_jac_g", [xs, ps], [gs, ca.jacobian(gs, xs)], ["x", "p"], ["g", "jac_g_x"])

@@ -42,7 +42,6 @@ from scenegraph.model.motion import Motion
 from scenegraph.problem import HandleTarget, PoseTarget, Subproblem, window_mask
 from scenegraph.problem.no_slip import NO_SLIP_WEIGHT
 from scenegraph.problem.jerk import JERK_WEIGHT
-from scenegraph.problem.transcription import COP_BOUND, ROOT_TOLERANCE
 from scenegraph.problem.stance_frame import STANCE_FRAME_WEIGHT
 from scenegraph.world.clearance import scene_clearance
 from scenegraph.world.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
@@ -197,8 +196,6 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
                     no_slip_weight=NO_SLIP_WEIGHT if step.kind == FULL else 0.0, contact_hz=SOFT_PIN_HZ,
                     # no ringing between the evaluation points (issue 15): the jerk's knot-to-knot jumps
                     jerk_weight=JERK_WEIGHT if step.kind == FULL else 0.0,
-                    root_tolerance=ROOT_TOLERANCE if step.kind == FULL else None,
-                    cop_bound=COP_BOUND if step.kind == FULL else None, cop_hz=240.0,
                     # decreasing horizon (tackle, dodge: running and dodging feet): the ground on
                     # a dense grid too, as synthesize does for runs — between the 30 Hz points a
                     # toe dipped 11–15 mm (audit gate 10 mm)
