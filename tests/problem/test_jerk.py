@@ -3,8 +3,8 @@ evaluation points)."""
 from dataclasses import replace
 
 import casadi as ca
-import pytest
 import numpy as np
+import pytest
 
 from scenegraph.model.body import DOF_NAMES, G, N_DOF, N_JOINT, make_character, standing_pose
 from scenegraph.model.motion import Motion, basis
