@@ -45,7 +45,7 @@ from scenegraph.problem.flight import momenta_fn
 from scenegraph.problem.no_slip import NO_SLIP_WEIGHT
 from scenegraph.problem.stance_frame import STANCE_FRAME_WEIGHT
 from scenegraph.world.clearance import scene_clearance
-from scenegraph.world.scene import Scene, coupling_springs, coupling_targets, goal_targets, handle_track
+from scenegraph.world.scene import CharacterState, Scene, coupling_springs, coupling_targets, goal_targets, handle_track
 from scenegraph.model.style import Style
 
 from schedules.plan.step import FREE, FULL, HARD, RELAXED, ROLES, STEP_KINDS, Step, vocabulary
@@ -138,7 +138,7 @@ def gait_flights(footsteps, flights=()) -> tuple[tuple[float, float], ...]:
                  if not any(fa < b - 1e-6 and a < fb - 1e-6 for fa, fb in flights))
 
 
-def start_velocity(st, weight: float) -> VelocityTarget:
+def start_velocity(st: CharacterState, weight: float) -> VelocityTarget:
     """The scene's start: the centre of mass's velocity (m/s, world) at the motion's start pulled
     toward the current motion's — the planned gait's in the first step — with ``weight`` (the
     start spring's, 1/m² there, (s/m)² here: 1 m/s counts like 1 m).  Without it the initial
