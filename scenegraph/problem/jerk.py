@@ -63,40 +63,40 @@ def dof_inertia(ch: Character, q: np.ndarray) -> np.ndarray:
     return np.maximum(cols, 1e-6)
 
 
+def _knot_scales(ch: Character, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(J, T', h, M_j) at the interior knots of ``motion``: the jump matrix (:func:`knot_jump_matrix`),
+    the warp slope T' (world s per unit s), the world knot spacing h (s) and the per-DOF inertias
+    (:func:`dof_inertia`) at the reference pose, the motion's at s = 0.5."""
+    K = motion.n_ctrl
+    J, s_k = knot_jump_matrix(K)
+    t1 = basis(len(motion.warp), s_k, 1) @ np.asarray(motion.warp, float) if len(s_k) else np.zeros(0)
+    q_ref = np.asarray(motion.state_at_s(np.array([0.5]))[0], float).reshape(-1)[:N_DOF]
+    return J, t1, t1 / max(K - 3, 1), dof_inertia(ch, q_ref)
+
+
 def jerk_rows(ch: Character, motion: Motion, P, mask: np.ndarray, weight: float):
     """Residual rows (MX column) of E_jerk (module docstring) for the control points ``P`` (K × 35,
     MX) at the interior knots whose jump a free control point (``mask``, K bools) moves; None when
     ``weight`` ≤ 0 or no such knot.  The reference pose of M_j is the motion's at s = 0.5."""
     if weight <= 0 or not np.any(mask):
         return None
-    K = motion.n_ctrl
-    J, s_k = knot_jump_matrix(K)
+    J, t1, h, m_j = _knot_scales(ch, motion)
     live = np.abs(J[:, mask]).sum(axis=1) > 0
     if not live.any():
         return None
-    J, s_k = J[live], s_k[live]
-    n_int = K - 3
-    t1 = basis(len(motion.warp), s_k, 1) @ np.asarray(motion.warp, float)  # T' (world s per unit s)
-    h = t1 / n_int  # world knot spacing (s)
-    q_ref = np.asarray(motion.state_at_s(np.array([0.5]))[0], float).reshape(-1)[:N_DOF]
-    m_jj = dof_inertia(ch, q_ref)
+    J, t1, h = J[live], t1[live], h[live]
     # F_ij = M_jj Δ(d³q/ds³)/T'³ h; row = sqrt(w h) F / (m g)
     row_scale = np.sqrt(weight * h) * h / t1 ** 3 / (ch.total_mass * G)  # (n_live,)
     Jw = J * row_scale[:, None]
     jumps = ca.mtimes(ca.DM(Jw), P[:, N_ROOT:])  # (n_live, 29): the joints' jumps in s, scaled per knot
-    return ca.vec(jumps * ca.repmat(ca.DM(m_jj[N_ROOT:]).T, Jw.shape[0], 1))
+    return ca.vec(jumps * ca.repmat(ca.DM(m_j[N_ROOT:]).T, Jw.shape[0], 1))
 
 
 def jerk_energy(ch: Character, motion: Motion, weight: float = 1.0) -> float:
     """E_jerk (N²·s, module docstring) of a numeric ``motion`` over all its interior knots:
     the unnormalised value of the rows of :func:`jerk_rows` (a diagnostic, and the tests' check)."""
-    K = motion.n_ctrl
-    J, s_k = knot_jump_matrix(K)
-    if not len(s_k):
+    J, t1, h, m_j = _knot_scales(ch, motion)
+    if not len(t1):
         return 0.0
-    t1 = basis(len(motion.warp), s_k, 1) @ np.asarray(motion.warp, float)
-    h = t1 / (K - 3)
-    q_ref = np.asarray(motion.state_at_s(np.array([0.5]))[0], float).reshape(-1)[:N_DOF]
-    F = (J @ np.asarray(motion.ctrl, float)[:, N_ROOT:]) / (t1 ** 3)[:, None] * h[:, None] \
-        * dof_inertia(ch, q_ref)[None, N_ROOT:]
+    F = (J @ np.asarray(motion.ctrl, float)[:, N_ROOT:]) / (t1 ** 3)[:, None] * h[:, None] * m_j[None, N_ROOT:]
     return float(weight * np.sum(h[:, None] * F ** 2))

@@ -57,7 +57,6 @@ class VelocityTarget:
     t: float
     velocity: tuple[float, float, float]
     weight: float = 1.0
-    name: str = "velocity"
 
 
 @dataclass(frozen=True)

@@ -149,7 +149,7 @@ def start_velocity(st: CharacterState, weight: float) -> VelocityTarget:
     q, qd, _ = (np.asarray(a, float).reshape(-1, N_DOF)[0] for a in m.at([m.start]))
     _, P, _ = momenta_fn(st.character)(q, qd)
     v = np.asarray(P, float).ravel() / st.character.total_mass
-    return VelocityTarget(m.start, tuple(float(a) for a in v), weight, name="start_velocity")
+    return VelocityTarget(m.start, tuple(float(a) for a in v), weight)
 
 
 def leap_flights_of(scene: Scene, who: str) -> tuple[tuple[float, float], ...]:
