@@ -154,9 +154,9 @@ def start_velocity(st: CharacterState, weight: float) -> VelocityTarget:
 
 def leap_flights_of(scene: Scene, who: str) -> tuple[tuple[float, float], ...]:
     """World s (take-off, landing) of every jump and hop goal of ``who`` (the goals with a
-    ``flight``), in time order.  The kinematic pre-solve states their ballistic momentum too
-    (``schedules.execution.executor.presolve_character``), so that a jump's full step starts with
-    its flight rows held instead of 4 m/s (per kg) away from them (docs/dynamic-motion.md, round 13)."""
+    ``flight``), in time order: what the kinematic pre-solve holds ballistic when
+    ``executor.PRESOLVE_FLIGHTS`` is on (off: measured, the iteration count did not fall reliably,
+    docs/dynamic-motion.md round 13)."""
     return tuple(sorted(tuple(float(t) for t in g.flight) for g in scene.goals
                         if g.character == who and getattr(g, "flight", None) is not None))
 
