@@ -72,7 +72,10 @@ def example_gait_pose(ch: Character, phase_l, phase_r, run: bool = False) -> np.
 
 
 def _root_path(footsteps: tuple[Footstep, ...], times: np.ndarray):
-    steps = sorted(footsteps, key=lambda f: f.t0)
+    # stances cut by the motion's ends count from their real heel strike / to their real toe-off:
+    # a cut first stance (both feet down at t = 0, one about to lift) otherwise put the first
+    # midpoint late, and two stances of one foot could pair up (walk: pelvis 14 cm behind its start)
+    steps = sorted(_uncut(footsteps, times[0], times[-1]), key=lambda f: f.t0)
     mids = [((a.t0 + a.t1 + b.t0 + b.t1) / 4, (np.array(a.position) + np.array(b.position)) / 2)
             for a, b in zip(steps, steps[1:])]
     if not mids:
@@ -116,10 +119,12 @@ def initial_motion(ch: Character, footsteps: tuple[Footstep, ...], t0: float, t1
     xy, heading = _root_path(footsteps, times)
     stand = standing_pose(ch)
     q = np.zeros((len(times), N_DOF))
-    ex_phases, phase_steps = None, footsteps
+    ex_phases = None
     if example is not None:
         ex_phases, ex_joints = (np.asarray(a, float) for a in example)
-        phase_steps = _uncut(footsteps, t0, t1)  # phases counted as in the example
+    # phases counted from the real heel strike, as the root path is: a stance the scene start cuts in
+    # half is at mid-stance at t0, the pelvis over its foot
+    phase_steps = _uncut(footsteps, t0, t1)
     for i, t in enumerate(times):
         ph_l, ph_r = leg_phase(phase_steps, "l", t), leg_phase(phase_steps, "r", t)
         if isinstance(run, bool):

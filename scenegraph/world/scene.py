@@ -56,6 +56,12 @@ class CharacterState:
     footsteps: tuple[Footstep, ...]
     motion: Motion
     start: tuple[float, float, float]  # x, y (m), heading (rad)
+    plan: Motion | None = None  # the initial motion, kept when ``motion`` is replaced: the planned entry
+
+    @property
+    def planned(self) -> "CharacterState":
+        """This character with its initial (planned) motion as the current one."""
+        return self if self.plan is None else replace(self, motion=self.plan)
 
     @property
     def style(self) -> Style:
@@ -265,7 +271,7 @@ def build_scene(scn: Scenario) -> Scene:
         run_from = change[0] if change is not None and change[2] == "run" else plan.run
         motion = plan.initial(ch) if plan.initial is not None else \
             initial_motion(ch, steps, 0.0, T, ground=ground, run=run_from, example=_example(scn, spec, styles))
-        chars.append(CharacterState(spec.name, ch, tuple(styles), steps, motion, start))
+        chars.append(CharacterState(spec.name, ch, tuple(styles), steps, motion, start, plan=motion))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     bounds = None
     if scn.timing == "free":

@@ -138,9 +138,10 @@ def gait_flights(footsteps, flights=()) -> tuple[tuple[float, float], ...]:
                  if not any(fa < b - 1e-6 and a < fb - 1e-6 for fa, fb in flights))
 
 
-def start_velocity(st: CharacterState, weight: float) -> VelocityTarget:
-    """The scene's start: the centre of mass's velocity (m/s, world) at the motion's start pulled
-    toward the current motion's — the planned gait's in the first step — with ``weight`` (the
+def start_velocity(st: CharacterState, weight: float, at: float | None = None) -> VelocityTarget:
+    """The scene's start: the centre of mass's velocity (m/s, world) at world time ``at`` (default:
+    the start of ``st``'s motion) pulled toward ``st``'s motion's there — the lowering passes the
+    planned motion (:attr:`CharacterState.planned`), so every step holds the same entry — with ``weight`` (the
     start spring's, 1/m² there, (s/m)² here: 1 m/s counts like 1 m).  Without it the initial
     momentum is free, and a walk_to walker entered falling at 6.3 m/s, caught by 12 body weights
     of ground force in the first 0.05 s (two_walkers' bob, docs/results.md); a target on the
@@ -149,7 +150,7 @@ def start_velocity(st: CharacterState, weight: float) -> VelocityTarget:
     q, qd, _ = (np.asarray(a, float).reshape(-1, N_DOF)[0] for a in m.at([m.start]))
     _, P, _ = momenta_fn(st.character)(q, qd)
     v = np.asarray(P, float).ravel() / st.character.total_mass
-    return VelocityTarget(m.start, tuple(float(a) for a in v), weight)
+    return VelocityTarget(m.start if at is None else float(at), tuple(float(a) for a in v), weight)
 
 
 def leap_flights_of(scene: Scene, who: str) -> tuple[tuple[float, float], ...]:
@@ -209,10 +210,12 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
     velocities = ()
     w_start = step.term("start")
     if w_start is not None and win[0] <= m.start + 1e-9:
+        # held to the planned entry (the initial motion's), not the current motion's: re-anchored on
+        # the current motion, each whole-scene step kept the last one's drift (hopscotch entered crouched)
         x, y, _ = st.start
-        z = float(handle_track(st, "pelvis", [m.start])[0][2])
+        z = float(handle_track(st.planned, "pelvis", [st.planned.motion.start])[0][2])
         targets += (HandleTarget("pelvis", m.start, (x, y, z), float(w_start), name="start"),)
-        velocities = (start_velocity(st, float(w_start)),)
+        velocities = (start_velocity(st.planned, float(w_start), at=m.start),)
     style = style_at(scene, who, step, step.window[0])
     style_end = style_at(scene, who, step, step.window[1])
     if style_end is style:
