@@ -359,3 +359,31 @@ def test_the_scene_start_holds_the_planned_entry_speed():
     assert later
     sc2 = build_scene(tackle)
     assert lower(sc2, later[0], later[0].characters[0])[0].velocities == ()
+
+
+def test_the_scene_start_is_held_to_the_plan_in_every_step():
+    """After a step has moved the motion (here: the whole motion lowered 0.3 m and sped up 1 m/s
+    forward), the next step that contains the scene's start still pulls the pelvis and the
+    centre of mass's velocity toward the *planned* entry (the initial motion's), not toward the
+    moved motion's: re-anchored on the current motion, each whole-scene step kept the drift of
+    the last one, and hopscotch entered its first hop crouched 0.4 m low."""
+    from scenegraph.model.motion import Motion
+    scn = load_scenario("two_walkers")
+    scene = build_scene(scn)
+    full = next(s for s in compile_schedule(scn).order() if s.kind == "full" and "bob" in s.characters)
+    sp0, _ = lower(scene, full, "bob")
+    st = scene.character("bob")
+    m = st.motion
+    t = np.linspace(m.start, m.end, 200)
+    q = np.asarray(m.at(t)[0]).reshape(-1, 35).copy()
+    q[:, 2] -= 0.3
+    q[:, 0] += 1.0 * (t - m.start)
+    moved = scene.with_motion("bob", Motion.from_samples(t, q, m.n_ctrl))
+    assert moved.character("bob").plan is m
+    sp1, _ = lower(moved, full, "bob")
+    start = lambda sp: next(h for h in sp.targets if h.name == "start")
+    assert start(sp1).point == pytest.approx(start(sp0).point, abs=1e-9)
+    assert sp1.velocities[0].velocity == pytest.approx(sp0.velocities[0].velocity, abs=1e-9)
+    # and the moved motion really is elsewhere: what a re-anchoring target would have read
+    from schedules.execution.lower import start_velocity
+    assert start_velocity(moved.character("bob"), 1.0).velocity[0] > sp0.velocities[0].velocity[0] + 0.5
