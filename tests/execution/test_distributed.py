@@ -96,7 +96,7 @@ def test_step_key_changes_only_for_the_edited_couple():
     sa, sb = build_scene(a), build_scene(b)
     sched_a, sched_b = compile_schedule(a), compile_schedule(b)
     assert [s.id for s in sched_a] == [s.id for s in sched_b]
-    first = [s for s in sched_a if s.cycle == 1 and s.kind == "timing"]
+    first = [s for s in sched_a if s.cycle == 1]
     assert {s.group for s in first} == {"a1+c1", "a2+c2"}
     for s in first:
         ka, kb = step_key(sa, s, {}, False), step_key(sb, sched_b.step(s.id), {}, False)
