@@ -683,7 +683,10 @@ class ScheduleSpec(_Model):
         "auto", description="auto: derived from the scenario; otherwise forced for all characters")
     cycles: int | None = Field(None, ge=1, le=50, description="schedule cycles; default per kind "
                                                               "(time_layered 2, coupled 4, decreasing_horizon 3)")
-    timewarp: Annotated[bool, Strict()] = Field(True, description="solve timing with relaxed dynamics before each full solve")
+    timewarp: Annotated[bool, Strict()] | None = Field(
+        None, description="a timing step (relaxed dynamics, free timewarp) before each whole-scene full solve: "
+                          "null (default) only where the duration is free (timing: free), true always, "
+                          "false never (the full step then frees the timewarp)")
     max_window: Num = Field(2.5, gt=0.1, le=600.0, description="longest window of one subproblem (s)")
     seam: Num | None = Field(None, gt=0.0, le=600.0, description="width of the seam window C (s); default: "
                                                                  "half of the shorter neighbour on each side")

@@ -29,8 +29,14 @@ How the schedule is chosen (``schedule.kind: auto``, the default):
    after another, each from the solved motion before it with its end free
    (``boundary:end=free``); one cycle unless ``cycles`` says otherwise.  Windows and seams
    are full steps (a window holds the global timewarp).
-3. Every subproblem over the whole scene uses the **timewarp** schedule: a ``timing`` Step
-   (timewarp and free placements, dynamics relaxed) then a ``full`` Step (dynamics hard).
+3. A subproblem over the whole scene of a scenario with ``timing: free`` uses the **timewarp**
+   schedule: a ``timing`` Step (timewarp, duration and free placements, dynamics relaxed) then a
+   ``full`` Step (dynamics hard).  Elsewhere it is one ``full`` Step with the timewarp held (the
+   footstep plan and the gait generator time the motion): a timing step reached its
+   100-iteration cap and was discarded in every bundled run measured (rounds 13–14,
+   docs/results.md "Timing steps"), so it cost 30–40 % of a run and changed nothing.
+   ``schedule.timewarp: true`` asks for timing steps everywhere, ``false`` for none (the full
+   step then frees the timewarp itself, :func:`_free`).
 
 An explicit ``schedule.kind`` overrides step 2: ``timewarp`` solves each branch jointly in
 one subproblem (couplings hard: the full steps solve the two hand-holding characters in one
@@ -58,7 +64,7 @@ from scenarios.weights import START_WEIGHT
 from schedules.plan.step import (COUPLED, DECREASING_HORIZON, FREE, FULL, HARD, JOINT, RELAXED, TIME_LAYERED, TIMEWARP, TIMING,
                    Group, Schedule, Step, StyleTimeline)
 
-__all__ = ["compile_schedule", "DEFAULT_CYCLES", "layer_windows", "receding_windows", "MIN_WINDOW", "MAX_STEPS"]
+__all__ = ["compile_schedule", "timing_steps", "DEFAULT_CYCLES", "layer_windows", "receding_windows", "MIN_WINDOW", "MAX_STEPS"]
 
 DEFAULT_CYCLES = {TIME_LAYERED: 2, COUPLED: 4, DECREASING_HORIZON: 3}
 EPS = 1e-9
@@ -273,11 +279,22 @@ def _terms(st: _Structure, b: _Block, kind: str) -> tuple[tuple[str, object], ..
     return tuple(terms)
 
 
-def _free(st: _Structure, b: _Block, kind: str, timewarp: bool, has_hard_coupling: bool) -> tuple[str, ...]:
+def timing_steps(scn: Scenario) -> bool:
+    """Whether whole-scene subproblems of ``scn`` get a timing step before their full step:
+    ``schedule.timewarp`` when it is given, else only with ``timing: free`` (a free duration
+    needs a free timewarp, and only a timing step frees it then).  Measured (docs/results.md,
+    round 14): with the duration fixed every bundled timing step ended at its cap and was
+    discarded — IPOPT does not converge on the relaxed problem, with the warp free or held."""
+    spec = scn.schedule or ScheduleSpec()
+    return spec.timewarp if spec.timewarp is not None else scn.timing == "free"
+
+
+def _free(st: _Structure, b: _Block, kind: str, has_hard_coupling: bool) -> tuple[str, ...]:
     """The free blocks of a Step, each one the executor frees exactly (step.FREE_BLOCKS).
 
-    The timewarp is free in timing steps (every step without the timewarp schedule) over the
-    whole scene only: a windowed step holds the one warp its neighbours see.  A character
+    The timewarp is free in timing steps (and in full steps with ``schedule.timewarp: false``;
+    without timing steps by default, full steps hold it) over the whole scene only: a windowed
+    step holds the one warp its neighbours see.  A character
     with a gait change keeps its warp too: its footstep plan times the walk and the run (a
     free warp compressed the walk and stretched the run into one energy-optimal speed); so
     does a character whose jumps or hops give their times (a free warp moved run_and_leap's
@@ -289,7 +306,8 @@ def _free(st: _Structure, b: _Block, kind: str, timewarp: bool, has_hard_couplin
     # a character whose leaps have given times keeps its warp too: the take-off and landing happen then
     timed_leaps = any(isinstance(g, (JumpGoal, HopGoal)) and g.character in b.characters
                       and (g.takeoff.time is not None or g.landing.time is not None) for g in st.scn.goals)
-    if (kind == TIMING or not timewarp) and whole and not gait_change and not timed_leaps:
+    warp_step = kind == TIMING or st.spec.timewarp is False
+    if warp_step and whole and not gait_change and not timed_leaps:
         free.append("timewarp")
         if st.scn.timing == "free":
             free.append("duration")
@@ -302,7 +320,7 @@ def _free(st: _Structure, b: _Block, kind: str, timewarp: bool, has_hard_couplin
 
 
 def _steps_of(st: _Structure, b: _Block, group: str, styles: dict[str, StyleTimeline]) -> list[Step]:
-    timewarp = st.spec.timewarp
+    timewarp = timing_steps(st.scn)
     kinds = list(b.kinds) if b.kinds is not None else [TIMING, FULL] if timewarp else [FULL]
     chars = "+".join(b.characters)
     rep = f"#{b.repeat}" if b.repeat > 1 else ""
@@ -316,7 +334,7 @@ def _steps_of(st: _Structure, b: _Block, group: str, styles: dict[str, StyleTime
             kind=kind,
             characters=b.characters,
             window=(float(b.window[0]), float(b.window[1])),
-            free=_free(st, b, kind, timewarp, hard_coupling),
+            free=_free(st, b, kind, hard_coupling),
             terms=terms,
             cycle=b.cycle,
             schedules=b.schedules + ((TIMEWARP,) if timewarp else ()),
@@ -451,12 +469,12 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
     for cycle in range(1, cycles + 1):
         stiffness = spec.stiffness(cycle) if alternating else None
         cycle_kinds = window_kinds
-        if mode == "coupled" and spec.timewarp and cycle > 1:
+        if mode == "coupled" and timing_steps(scn) and cycle > 1:
             # the timing is settled in the first cycle; later cycles refine with full dynamics
             # as the band stiffens (their timing steps stopped at the iteration cap and were
             # discarded in 5 of 6 handhold solves while costing as much as the full steps)
             cycle_kinds = (FULL,)
-        if mode == "adversarial" and spec.timewarp and cycle > 1:
+        if mode == "adversarial" and timing_steps(scn) and cycle > 1:
             # a decreasing-horizon window after the first starts inside the motion: the executor
             # holds the timewarp there, so a timing step would only relax the dynamics — its
             # result, kept when it converged, warm-started the full step far from physical
@@ -486,7 +504,7 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
                 blocks.append(_Block((members[0],), window, cycle, role, label, sched, seam=seam_t,
                                      kinds=window_kinds))
     name = "+".join(sorted(members))
-    group = Group(name, tuple(sorted(members)), sched + ((TIMEWARP,) if spec.timewarp else ()),
+    group = Group(name, tuple(sorted(members)), sched + ((TIMEWARP,) if timing_steps(scn) else ()),
                   tuple(reasons), tuple(order))
     return blocks, group
 

@@ -67,7 +67,7 @@ def test_walk_end_to_end(walk_run):
 
     d, res = walk_run
     assert res.returncode == 0, res.stderr[-3000:]
-    assert "[1/2] walker/c1/whole/timing" in res.stderr and "[2/2] walker/c1/whole/full" in res.stderr
+    assert "[1/1] walker/c1/whole/full" in res.stderr  # no timing step: the duration is fixed
     assert "ETA" in res.stderr
     stage = d / "tmp" / "walk.usda"
     assert stage.is_file()
@@ -75,7 +75,7 @@ def test_walk_end_to_end(walk_run):
     assert n >= 30 and dp <= 1e-5 and dr <= 1e-4
     rep = json.loads((d / "tmp" / "r.json").read_text())
     assert rep["scenario"] == "walk"
-    assert [s["id"] for s in rep["steps"]] == ["walker/c1/whole/timing", "walker/c1/whole/full"]
+    assert [s["id"] for s in rep["steps"]] == ["walker/c1/whole/full"]
     for s in rep["steps"]:
         assert _accepted(s) and s["iterations"] > 0 and s["seconds"] > 0 and np.isfinite(s["energy"])
     audit = rep["characters"]["walker"]["audit"]
@@ -106,7 +106,7 @@ def test_walk_end_to_end(walk_run):
     # checkpoints: data only, each file's SHA-256 in the manifest
     man = json.loads((d / "run" / "manifest.json").read_text())
     assert man["format"] == 2 and set(man["checkpoints"]) == {
-        "000_walker.json", "000_walker.npz", "001.json", "001.npz", "002.json", "002.npz"}
+        "000_walker.json", "000_walker.npz", "001.json", "001.npz"}
     assert not list((d / "run").rglob("*.pkl"))
 
 

@@ -198,8 +198,11 @@ def fake_run(monkeypatch):
     from scenegraph.world.scene import build_scene
     from schedules.plan.compiler import compile_schedule
 
-    scn = load_scenario("walk")
+    from scenarios import bundled_scenarios, parse_scenario
+    # two steps (a timing and a full step, asked for): the tests edit the second one's checkpoint
+    scn = parse_scenario(bundled_scenarios()["walk"].read_text() + "schedule:\n  timewarp: true\n", "walk.yaml")
     scene, schedule = build_scene(scn), compile_schedule(scn)
+    assert len(schedule) == 2
     calls = []
 
     def presolve(scene, who):

@@ -45,7 +45,9 @@ def _variants():
     yield load_scenario(str(FULL_YAML))
     for kind in ("timewarp", "time_layered", "coupled", "decreasing_horizon"):
         yield _variant("handhold", f"schedule:\n  kind: {kind}\n  cycles: 1\n")
+        yield _variant("handhold", f"schedule:\n  kind: {kind}\n  cycles: 1\n  timewarp: true\n")
     yield _variant("walk", "schedule:\n  timewarp: false\n")
+    yield _variant("walk", "schedule:\n  timewarp: true\n")
     yield _variant("walk_to", "timing: free\nduration_bounds: [1.0, 2.0]\n")
     yield _variant("walk_to", replace_=("duration: 1.4", "duration: 6.0"))
 
@@ -111,7 +113,7 @@ def _end_time_group(sp):
 
 
 def test_free_timing_frees_the_duration_within_its_bounds():
-    fixed = load_scenario("walk_to")
+    fixed = _variant("walk_to", "schedule:\n  timewarp: true\n")  # a timing step asked for, the duration fixed
     free = _variant("walk_to", "timing: free\nduration_bounds: [1.0, 2.0]\n")
     for scn, expect in ((fixed, "eq"), (free, "ineq")):
         timing = compile_schedule(scn).order()[0]
@@ -132,7 +134,7 @@ def test_free_timing_frees_the_duration_within_its_bounds():
 # --- hard couplings: a joint solve ---------------------------------------------------------------
 
 def test_a_hard_hand_hold_lowers_to_one_joint_problem():
-    scn = _variant("handhold", "schedule:\n  kind: timewarp\n")
+    scn = _variant("handhold", "schedule:\n  kind: timewarp\n  timewarp: true\n")
     scene = build_scene(scn)
     steps = compile_schedule(scn).order()
     timing, full = steps

@@ -64,7 +64,7 @@ def test_crowd_couples_are_independent_branches():
             if d.startswith("step:"):
                 assert schedule.step(d.split(":", 1)[1]).group == couple
     cp = critical_path(schedule)
-    assert len(schedule) == 36 and cp.length == 6 and cp.max_speedup == pytest.approx(6.0)
+    assert len(schedule) == 24 and cp.length == 4 and cp.max_speedup == pytest.approx(6.0)  # 4 full steps a couple
 
 
 def test_resumed_step_is_data_without_dependencies():
@@ -80,8 +80,9 @@ def test_critical_path_uses_measured_times():
     times = {s.id: (10.0 if s.group.startswith("adult3") else 1.0) for s in schedule}
     cp = critical_path(schedule, times)
     assert all(sid.split("/")[0].endswith("3") for sid in cp.steps)
-    assert cp.length == pytest.approx(60.0)
-    assert cp.max_speedup == pytest.approx((60.0 + 30.0) / 60.0)
+    # each couple: 4 full steps (2 cycles × 2 characters; no timing step with a fixed duration)
+    assert cp.length == pytest.approx(40.0)
+    assert cp.max_speedup == pytest.approx((40.0 + 20.0) / 40.0)
 
 
 def test_step_key_changes_only_for_the_edited_couple():
@@ -96,7 +97,7 @@ def test_step_key_changes_only_for_the_edited_couple():
     sa, sb = build_scene(a), build_scene(b)
     sched_a, sched_b = compile_schedule(a), compile_schedule(b)
     assert [s.id for s in sched_a] == [s.id for s in sched_b]
-    first = [s for s in sched_a if s.cycle == 1 and s.kind == "timing"]
+    first = [s for s in sched_a if s.cycle == 1]
     assert {s.group for s in first} == {"a1+c1", "a2+c2"}
     for s in first:
         ka, kb = step_key(sa, s, {}, False), step_key(sb, sched_b.step(s.id), {}, False)

@@ -44,6 +44,8 @@ goals:
       - {foot: r, position: [-0.70, 2.91], time: [0.00, 0.11]}
       - {foot: l, position: [0.00, 3.09], time: [0.00, 0.6]}
       - {foot: r, position: [X_LAST, 2.91], time: [0.55, 0.6]}
+schedule:
+  timewarp: true   # a timing step too (not the default with a fixed duration): two steps per walker
 """
 
 

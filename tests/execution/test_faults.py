@@ -76,13 +76,31 @@ def _fake_solution(scene, step):
     return out
 
 
+# The bundled walk with a timing step asked for (schedule.timewarp: true): two steps, so that a
+# fault can hit the second one after the first is checkpointed (by default walk is one full step).
+WALK2 = "walk2.yaml"
+
+
+def _walk2_text() -> str:
+    from scenarios import bundled_scenarios
+    return bundled_scenarios()["walk"].read_text() + "schedule:\n  timewarp: true\n"
+
+
 @pytest.fixture()
 def walk():
-    from scenarios.loader import load_scenario
+    from scenarios import parse_scenario
     from scenegraph.world.scene import build_scene
     from schedules.plan.compiler import compile_schedule
-    scn = load_scenario("walk")
+    scn = parse_scenario(_walk2_text(), WALK2)
     return build_scene(scn), compile_schedule(scn)
+
+
+@pytest.fixture()
+def walk2(tmp_path) -> str:
+    """The two-step walk as a scenario file in tmp_path (its path, for ``compose run``)."""
+    f = tmp_path / WALK2
+    f.write_text(_walk2_text())
+    return str(f)
 
 
 def _committed(run_dir: Path) -> list[str]:
@@ -135,10 +153,10 @@ def test_interrupt_swallowed_by_the_solver_still_stops_the_run(tmp_path, walk, m
         np.testing.assert_array_equal(c.motion.ctrl, b.scene.character(c.name).motion.ctrl)
 
 
-def test_sigint_during_a_real_solve_exits_130_with_a_resume_hint(tmp_path):
+def test_sigint_during_a_real_solve_exits_130_with_a_resume_hint(tmp_path, walk2):
     """The real walk (IPOPT capped at 20 iterations per step to keep it short): SIGINT as soon
     as step 1 is reported, i.e. while step 2 is being built or solved."""
-    p = subprocess.Popen([sys.executable, "-m", "schedules.cli.main", "run", "walk", "-o", "w.usda", "--run-dir", "run"],
+    p = subprocess.Popen([sys.executable, "-m", "schedules.cli.main", "run", WALK2, "-o", "w.usda", "--run-dir", "run"],
                          cwd=tmp_path, env=_env(COMPOSE_MAX_ITER="20"), stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True, preexec_fn=_default_sigint)
     lines = []
@@ -155,7 +173,7 @@ def test_sigint_during_a_real_solve_exits_130_with_a_resume_hint(tmp_path):
     hint = [line for line in out.splitlines() if "interrupted" in line and "compose:" in line]
     assert len(hint) == 1, out
     m = re.fullmatch(r"compose: interrupted at step (\d) \(([^)]+)\); resume with: "
-                     r"compose run walk --resume --run-dir run -o w\.usda", hint[0])
+                     r"compose run walk2\.yaml --resume --run-dir run -o w\.usda", hint[0])
     assert m, hint
     n = int(m.group(1))
     assert m.group(2) == ["presolve walker", "walker/c1/whole/timing", "walker/c1/whole/full"][n]
@@ -174,7 +192,7 @@ def test_resume_command_repeats_the_run_arguments():
                                     "--fps 24 --fail-capped")
 
 
-def test_interrupt_during_export_names_the_phase(tmp_path, monkeypatch, capfd):
+def test_interrupt_during_export_names_the_phase(tmp_path, monkeypatch, capfd, walk2):
     monkeypatch.setattr(ex, "presolve_character", _fake_presolve)
     monkeypatch.setattr(ex, "solve_step", lambda scene, step, presolve, contacts=None: _fake_solution(scene, step))
     import scenegraph.export.usd as ue
@@ -185,10 +203,10 @@ def test_interrupt_during_export_names_the_phase(tmp_path, monkeypatch, capfd):
         raise AssertionError("the signal handler did not raise")
 
     monkeypatch.setattr(ue, "export_usd", export)
-    rc = main(["run", "walk", "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")])
+    rc = main(["run", walk2, "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")])
     err = capfd.readouterr().err
     assert rc == 130
-    assert "interrupted during the audit and export (all 2 steps are checkpointed); resume with: compose run walk " \
+    assert f"interrupted during the audit and export (all 2 steps are checkpointed); resume with: compose run {walk2} " \
            "--resume" in err
     assert _committed(tmp_path / "run") == ["000_walker", "001", "002"]
     assert not (tmp_path / "w.usda").exists()
@@ -205,7 +223,7 @@ def _raise_in(monkeypatch, step_no: int):
     monkeypatch.setattr(ex, "solve_step", solve)
 
 
-def test_exception_in_the_solve_is_the_steps_named_failure(tmp_path, monkeypatch, capfd):
+def test_exception_in_the_solve_is_the_steps_named_failure(tmp_path, monkeypatch, capfd, walk2):
     """The real ``solve_step`` with ``solve`` (scenegraph.problem) raising."""
     monkeypatch.setattr(ex, "presolve_character", _fake_presolve)
 
@@ -214,7 +232,7 @@ def test_exception_in_the_solve_is_the_steps_named_failure(tmp_path, monkeypatch
 
     monkeypatch.setattr(ex, "solve", solve)
     monkeypatch.delenv("COMPOSE_DEBUG", raising=False)
-    rc = main(["run", "walk", "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")])
+    rc = main(["run", walk2, "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")])
     err = capfd.readouterr().err
     assert rc == 1, err
     assert f"compose: error: step 1 (walker/c1/whole/timing) failed: ZeroDivisionError: float division by zero; " \
@@ -224,9 +242,9 @@ def test_exception_in_the_solve_is_the_steps_named_failure(tmp_path, monkeypatch
     assert not (tmp_path / "w.usda").exists()
 
 
-def test_a_later_steps_crash_keeps_the_earlier_steps(tmp_path, monkeypatch, capfd):
+def test_a_later_steps_crash_keeps_the_earlier_steps(tmp_path, monkeypatch, capfd, walk2):
     _raise_in(monkeypatch, 2)
-    rc = main(["run", "walk", "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")])
+    rc = main(["run", walk2, "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")])
     err = capfd.readouterr().err
     assert rc == 1
     failed = [line for line in err.splitlines() if "failed" in line]
@@ -238,16 +256,16 @@ def test_a_later_steps_crash_keeps_the_earlier_steps(tmp_path, monkeypatch, capf
     calls = []
     monkeypatch.setattr(ex, "solve_step", lambda scene, step, presolve, contacts=None:
                         calls.append(step.id) or _fake_solution(scene, step))
-    assert main(["run", "walk", "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run"),
+    assert main(["run", walk2, "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run"),
                  "--resume"]) in (0, 1)
     assert calls == ["walker/c1/whole/full"]
     assert (tmp_path / "w.usda").exists()
 
 
 @pytest.mark.parametrize("how", ["env", "flag"])
-def test_debug_shows_the_traceback(tmp_path, monkeypatch, capfd, how):
+def test_debug_shows_the_traceback(tmp_path, monkeypatch, capfd, how, walk2):
     _raise_in(monkeypatch, 1)
-    argv = ["run", "walk", "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")]
+    argv = ["run", walk2, "-o", str(tmp_path / "w.usda"), "--run-dir", str(tmp_path / "run")]
     if how == "env":
         monkeypatch.setenv("COMPOSE_DEBUG", "1")
     else:

@@ -12,7 +12,7 @@ from scenarios.bundled import bundled_syntheses
 from schedules import (COUPLED, DECREASING_HORIZON, JOINT, TIME_LAYERED, TIMEWARP, Schedule, Step,
                        compile_schedule)
 from schedules.cli.main import main
-from schedules.plan.compiler import layer_windows
+from schedules.plan.compiler import layer_windows, timing_steps
 from scenarios.weights import AVOID_WEIGHT, START_WEIGHT, TARGET_WEIGHT
 
 FULL = Path(__file__).resolve().parents[1] / "scenarios" / "full.yaml"
@@ -37,23 +37,24 @@ def _blocks(s: Schedule) -> dict[str, list[Step]]:
 
 KINDS = [
     # scenario, kinds of the schedule, number of independent branches
-    ("walk", {TIMEWARP}, 1),
-    ("walk_to", {TIMEWARP}, 1),
-    ("two_walkers", {TIMEWARP}, 2),
-    ("walk_to_run", {TIME_LAYERED, TIMEWARP}, 1),
-    ("handhold", {COUPLED, TIMEWARP}, 1),
-    ("handhold_child_adapts", {COUPLED, TIMEWARP}, 1),
-    ("crowd", {COUPLED, TIMEWARP}, 6),
-    ("tackle", {DECREASING_HORIZON, TIMEWARP}, 1),
-    ("tackle_dodge", {DECREASING_HORIZON, TIMEWARP}, 1),
-    ("two_tacklers", {DECREASING_HORIZON, TIMEWARP}, 1),
+    # no bundled scene has timing: free, so none has a timing step (the timewarp schedule)
+    ("walk", set(), 1),
+    ("walk_to", set(), 1),
+    ("two_walkers", set(), 2),
+    ("walk_to_run", {TIME_LAYERED}, 1),
+    ("handhold", {COUPLED}, 1),
+    ("handhold_child_adapts", {COUPLED}, 1),
+    ("crowd", {COUPLED}, 6),
+    ("tackle", {DECREASING_HORIZON}, 1),
+    ("tackle_dodge", {DECREASING_HORIZON}, 1),
+    ("two_tacklers", {DECREASING_HORIZON}, 1),
     # edits of one style (paper §7): the walk's shape, one subproblem each
-    ("suitcase", {TIMEWARP}, 1),
-    ("limp", {TIMEWARP}, 1),
-    ("uphill", {TIMEWARP}, 1),
-    ("downhill", {TIMEWARP}, 1),
-    ("turn180", {TIMEWARP}, 1),
-    ("springy_run", {TIMEWARP}, 1),
+    ("suitcase", set(), 1),
+    ("limp", set(), 1),
+    ("uphill", set(), 1),
+    ("downhill", set(), 1),
+    ("turn180", set(), 1),
+    ("springy_run", set(), 1),
     # jumps: take-off and landing times given, no timing step (schedule.timewarp: false)
     ("broad_jump", set(), 1),
     ("twist_jump", set(), 1),
@@ -90,8 +91,9 @@ def test_general_properties(name):
     pos = {st.id: i for i, st in enumerate(order)}
     assert len(pos) == len(s) == g.number_of_nodes()
     assert all(pos[a] < pos[b] for a, b in g.edges()), "order() must be a topological order"
-    # timewarp schedule for every subproblem: timing (relaxed dynamics) then full (hard dynamics);
-    # a time-layered branch solves its timing once over the whole duration, its windows full only
+    # with timing steps (timing: free, or schedule.timewarp: true): timing (relaxed dynamics) then
+    # full (hard dynamics); a time-layered branch solves its timing once over the whole duration,
+    # its windows full only.  Without: one full step, the timewarp held unless schedule.timewarp: false
     layered = {gr.name for gr in s.groups if TIME_LAYERED in gr.kinds
                if any(st.role == "whole" and st.group == gr.name for st in order)}
     for block, steps in _blocks(s).items():
@@ -120,7 +122,11 @@ def test_general_properties(name):
             assert all("timewarp" not in st.free for st in steps), block
             continue
         spec = load_scenario(name).schedule
-        if spec is not None and not spec.timewarp:  # schedule.timewarp: false (the jumps): no timing step
+        if not timing_steps(load_scenario(name)) and (spec is None or spec.timewarp is None):
+            # the default without timing: free: one full step, the timewarp held (the footstep plan times it)
+            assert [st.kind for st in steps] == ["full"] and "timewarp" not in steps[0].free, block
+            continue
+        if spec is not None and spec.timewarp is False:  # schedule.timewarp: false (the jumps): no timing step
             # the full step times it, unless leaps with given times hold the warp (their take-off and landing)
             timed = any(getattr(g, "type", "") in ("jump", "hop") and (g.takeoff.time is not None
                         or g.landing.time is not None) for g in load_scenario(name).goals)
@@ -148,10 +154,11 @@ def test_general_properties(name):
 
 # --- partial-order properties ---------------------------------------------------------------------
 
-def test_walk_is_one_timewarp_pair_on_explicit_footprints():
+def test_walk_is_one_full_step_on_explicit_footprints():
     s = _compile("walk")
-    assert [st.id for st in s.order()] == ["walker/c1/whole/timing", "walker/c1/whole/full"]
+    assert [st.id for st in s.order()] == ["walker/c1/whole/full"]
     full = s.order()[-1]
+    assert "timewarp" not in full.free  # the footprints' times are the motion's
     assert "footprints" not in full.free  # explicit footprints are fixed
     assert full.goals == ("footprints_0",) and full.term("goal:footprints_0") == "hard"
     assert full.term("start") == START_WEIGHT  # the start is a soft spring (executor), not a constraint
@@ -179,7 +186,7 @@ def test_time_layered_seam_runs_after_both_windows():
     s = _compile("walk_to_run")
     steps = s.order()
     whole = s.step("runner/c1/whole/full")
-    assert steps[0].id == "runner/c1/whole/timing" and steps[1] is whole and whole.window == (0.0, 2.0)
+    assert steps[0] is whole and whole.window == (0.0, 2.0)
     assert max(st.cycle for st in steps) == 1  # solved whole first: one layered cycle by default
     for cycle in (1,):
         w0 = s.step(f"runner/c{cycle}/w0/full")
@@ -244,7 +251,10 @@ def test_solves_per_cycle_decides_who_adapts_more():
     fulls = [st for st in s.order() if st.kind == "full"]
     assert [st.characters[0] for st in fulls] == ["child", "adult", "child"] * 4
     assert s.order()[0].characters == ("child",)
-    # coupled schedules settle the timing in their first cycle
+    # coupled schedules settle the timing in their first cycle (with timing steps asked for)
+    text = bundled_scenarios()["handhold_child_adapts"].read_text().replace("schedule:\n", "schedule:\n  timewarp: true\n")
+    s = _compile(text)
+    assert s.order()[0].kind == "timing"
     assert {st.cycle for st in s.order() if st.kind == "timing"} == {1}
 
 
@@ -360,10 +370,10 @@ def test_full_scenario_branches():
 
 
 @pytest.mark.parametrize("kind,expect", [
-    ("timewarp", {JOINT, TIMEWARP}),
-    ("time_layered", {JOINT, TIME_LAYERED, TIMEWARP}),
-    ("coupled", {COUPLED, TIMEWARP}),
-    ("decreasing_horizon", {DECREASING_HORIZON, TIMEWARP}),
+    ("timewarp", {JOINT}),  # no timing step without timing: free (the kind still solves jointly)
+    ("time_layered", {JOINT, TIME_LAYERED}),
+    ("coupled", {COUPLED}),
+    ("decreasing_horizon", {DECREASING_HORIZON}),
 ])
 def test_explicit_schedule_overrides_the_compiler(kind, expect):
     s = _compile("handhold", f"schedule:\n  kind: {kind}\n  cycles: 2\n")
@@ -380,9 +390,34 @@ def test_explicit_schedule_can_drop_the_timing_step():
     assert "timewarp" in s.order()[0].free and TIMEWARP not in s.kinds
 
 
+def test_timing_steps_only_where_the_duration_is_free():
+    """By default a whole-scene subproblem gets a timing step only with ``timing: free`` (its free
+    duration rides on the timewarp, which only a timing step frees); with the duration fixed the
+    full step holds the warp — every such timing step ended at its cap and was discarded
+    (docs/results.md, round 14).  ``schedule.timewarp`` overrides both ways."""
+    free = _compile("walk_to", "timing: free\nduration_bounds: [1.0, 2.0]\n")
+    timing, full = free.order()
+    assert (timing.kind, full.kind) == ("timing", "full") and free.has_path(timing.id, full.id)
+    assert {"timewarp", "duration"} <= set(timing.free) and "timewarp" not in full.free
+    assert TIMEWARP in free.kinds
+    fixed = _compile("walk_to")
+    assert [(st.kind, "timewarp" in st.free) for st in fixed.order()] == [("full", False)]
+    forced = _compile("walk_to", "schedule:\n  timewarp: true\n")
+    assert [st.kind for st in forced.order()] == ["timing", "full"] and "timewarp" in forced.order()[0].free
+    off = _compile("walk_to", "timing: free\nduration_bounds: [1.0, 2.0]\nschedule:\n  timewarp: false\n")
+    assert [st.kind for st in off.order()] == ["full"] and {"timewarp", "duration"} <= set(off.order()[0].free)
+
+
+def test_schedule_timewarp_must_be_a_boolean_or_null():
+    assert _compile("walk", "schedule:\n  timewarp: null\n").order()[0].kind == "full"
+    with pytest.raises(Exception) as e:
+        _compile("walk", "schedule:\n  timewarp: 1\n")
+    assert "timewarp" in str(e.value)
+
+
 def test_explicit_coupled_puts_everyone_in_one_branch():
     s = _compile("two_walkers", "schedule:\n  kind: coupled\n")
-    assert len(s.groups) == 1 and s.kinds == {COUPLED, TIMEWARP}
+    assert len(s.groups) == 1 and s.kinds == {COUPLED}
 
 
 # --- windows -----------------------------------------------------------------------------------------

@@ -164,7 +164,9 @@ def test_lowering_sets_the_weights_in_full_steps_only():
     from scenegraph.world.scene import build_scene
     from schedules.execution.lower import lower
     from schedules.plan.compiler import compile_schedule
-    scn = load_scenario("walk")
+    from scenarios import bundled_scenarios, parse_scenario
+    text = bundled_scenarios()["walk"].read_text() + "schedule:\n  timewarp: true\n"  # a timing step too
+    scn = parse_scenario(text, "walk_timed.yaml")
     scene = build_scene(scn)
     kinds = set()
     for step in compile_schedule(scn).order():
