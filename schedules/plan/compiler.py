@@ -406,6 +406,9 @@ def _program(st: _Structure, members: list[str], mode: str) -> tuple[list[_Block
             windows, seams = layer_windows(T, changes, spec.max_window, spec.seam)
     else:
         windows, seams = [(0.0, T)], []
+    if spec.timewarp is None and not timing_steps(scn):
+        reasons.append("no timing step: the duration is fixed, so the footstep plan's timewarp is held "
+                       "(timing: free or schedule.timewarp: true adds one)")
     if mode == "adversarial" and (changes or T > spec.max_window + EPS):
         reasons.append("not time-layered: the decreasing horizon already restricts the windows")
 

@@ -402,6 +402,7 @@ def test_timing_steps_only_where_the_duration_is_free():
     assert TIMEWARP in free.kinds
     fixed = _compile("walk_to")
     assert [(st.kind, "timewarp" in st.free) for st in fixed.order()] == [("full", False)]
+    assert any("no timing step" in r for r in fixed.groups[0].reasons)  # `compose schedule` says why
     forced = _compile("walk_to", "schedule:\n  timewarp: true\n")
     assert [st.kind for st in forced.order()] == ["timing", "full"] and "timewarp" in forced.order()[0].free
     off = _compile("walk_to", "timing: free\nduration_bounds: [1.0, 2.0]\nschedule:\n  timewarp: false\n")
