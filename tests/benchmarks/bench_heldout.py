@@ -25,7 +25,8 @@ frame; ``clip_target(onesided=True)``).  Each prediction is ``compose evaluate-s
 (scenegraph/nio/heldout.py's measures): learned / default / springs off / kinematic against the
 real trial.  ``learn_s`` is the slower of the two learns (NIO and its target, wall clock).
 ``direction_score`` is the learned style's over both trials (features hit / features counted).
-``audits_pass`` is 1 when every learned prediction passes its physics audit.  The reports
+``audits_pass`` is 1 when every learned prediction passes its physics audit (judged as
+``compose run`` judges a scene, plus the stance slide as a distance: ``evaluate.audit_entry``).  The reports
 (JSON) and joint-curve plots are written to ``--out``.  Last line, exactly:
 
 ``speed_all_deg=<l>/<d>/<s>/<k> speed_trunk_arms_deg=<l>/<d>/<s>/<k> turn_all_deg=<l>/<d>/<s>/<k>
@@ -108,7 +109,9 @@ def main() -> None:
             r, a = v[k]["rms_deg"], v[k]["audit"]
             print(f"  {name} {k:12s} all {r['all']:6.2f} legs {r['legs']:6.2f} trunk {r['pelvis_trunk']:6.2f} "
                   f"arms {r['arms']:6.2f} trunk+arms {r['trunk_arms']:6.2f} deg  root {v[k]['root_path_m']['rms']:.3f} m  "
-                  f"audit {'pass' if a['passes'] else 'FAIL'}  {v[k]['solver']['status']} "
+                  f"audit {'pass' if a['passes'] else 'FAIL ' + ','.join(a.get('fails_on', []))} "
+                  f"(footstep {1e3 * a['footstep_error_max']:.1f} mm, slide {1e3 * a['stance_slide_max_m']:.1f} mm)  "
+                  f"{v[k]['solver']['status']} "
                   f"{v[k]['solver']['iterations']} it  direction {(v[k]['direction'] or {}).get('score')}", flush=True)
         for pair, by_group in rep["paired_bootstrap_deg"].items():
             b = by_group["trunk_arms"]

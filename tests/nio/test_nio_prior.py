@@ -243,3 +243,35 @@ def test_learn_with_strength_prior_and_coarse_ties_keeps_them():
         assert th[s + i("knee_flex_l")] == pytest.approx(th[s + i("knee_flex_r")], rel=1e-6, abs=1e-9)
     prov = res.style.provenance.model_dump()
     assert prov["alpha_ref"] == "strength" and prov["tie"] == "coarse" and prov["spring_prior"] == 0.1
+
+
+def test_reference_trust_box_bounds_the_log_change_of_every_alpha():
+    """With the strength reference an absolute box (α by r/M) lets a step of r = 0.03 move the
+    strong joints' α (reference 26× below 1/M) by ~78 % — a log change of −1.5, which the
+    log-normal prior charges ~2.3 per joint; the reference box moves every α by at most 3 %."""
+    from scenegraph.nio.bundle import trust_scales
+    from scenegraph.nio.prior import alpha_reference
+    from scenegraph.nio.theta import theta_scales
+
+    ref = alpha_reference("strength")
+    th = default_style().vector().copy()
+    th[A] = ref
+    scales = theta_scales(default_style())
+    g = np.zeros(len(th))
+    g[A] = -1.0 / ref  # a cut that pays for lowering every α in proportion to 1/α_ref
+    g[A.start + JOINT_DOF_NAMES.index("wrist_flex_l")] = 5.0
+    cuts = [(1.0, g)]
+    for mode, worst in (("absolute", 0.5), ("reference", None)):
+        box = trust_scales(scales, mode, ref)
+        new, _ = model_step(th, cuts, 0.03, box, 0.0)
+        assert new[A].sum() == pytest.approx(1.0)
+        dlog = np.abs(np.log(np.maximum(new[A], 1e-12) / ref))
+        if worst is None:
+            assert dlog.max() <= np.log(1 / 0.97) + 1e-9
+        else:
+            assert dlog.max() > worst
+    assert np.array_equal(trust_scales(scales, "absolute", ref), scales)
+    u = trust_scales(scales, "reference", None)
+    assert np.allclose(u[A], 1.0 / N_JOINT) and np.allclose(u, scales)  # uniform: the same box
+    with pytest.raises(ValueError, match="alpha_trust"):
+        trust_scales(scales, "log")
