@@ -242,7 +242,9 @@ def test_seeded_counterexamples_enter_g(local_nio):
 
 def test_shipped_styles_have_provenance():
     """Every style in scenarios/styles/ was learned: provenance names a shipped clip (never an
-    _iclone one), frames, body, versions, final G and the measured re-synthesis."""
+    _iclone one), frames, body, versions, final G, and the re-synthesis where it was measured (the
+    styles re-learned in round 14 with the prior carry none: issue #18 made the held-out test the
+    measure, docs/learning.md)."""
     from pathlib import Path
 
     from scenegraph.model.style import load_style
@@ -258,7 +260,8 @@ def test_shipped_styles_have_provenance():
         assert pv.g_final is not None and pv.g_final >= 0 and pv.versions, f
         assert abs(st.alpha.sum() - 1) < 1e-6
         extra = pv.model_extra or {}
-        assert set(extra["resynth_rms_deg"]) >= {"learned", "default", "springs_off"}, f
+        if "resynth_rms_deg" in extra:  # measured by bench_nio.py --out (a smoke test since issue #18)
+            assert set(extra["resynth_rms_deg"]) >= {"learned", "default", "springs_off"}, f
         assert "compose learn" in f.read_text().splitlines()[0], f
         assert st.example is not None and len(st.example.phase_l) >= 20, f  # X_T's poses by leg phase
 

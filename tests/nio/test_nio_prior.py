@@ -200,7 +200,8 @@ def test_learn_header_names_the_reference_and_spring_prior():
 
 
 @pytest.mark.parametrize("extra, message", [(["--spring-prior", "-1"], "--spring-prior -1"),
-                                            (["--alpha-ref", "strength"], "--alpha-ref strength")])
+                                            (["--alpha-ref", "strength", "--alpha-prior", "0", "--tie", "none"],
+                                             "--alpha-ref strength")])
 def test_learn_rejects_bad_prior_options_before_reading_the_clip(tmp_path, extra, message):
     import subprocess
     import sys
