@@ -252,7 +252,8 @@ def save_learned(res, out, clip_name, frames: tuple[int, int] | None, body: str,
 
 
 def _option_flags(prov: dict) -> str:
-    """The non-default `compose learn` options a provenance records, as command-line flags."""
+    """The `compose learn` options a provenance records, as command-line flags: the non-default
+    NIO options, and the estimator's (prior, ties, contacts) always."""
     from scenegraph.model.body import N_JOINT
 
     flags = ""
@@ -262,16 +263,16 @@ def _option_flags(prov: dict) -> str:
         flags += f" --hessian {prov['hessian']}"
     if prov.get("alpha_floor"):
         flags += f" --alpha-floor {prov['alpha_floor'] * N_JOINT:g}"
-    if prov.get("alpha_prior"):
-        flags += f" --alpha-prior {prov['alpha_prior']:g}"
+    # the estimator's options always (their defaults changed in round 14: a provenance without
+    # them was learned with no prior, no ties and central contacts)
+    w, tie = float(prov.get("alpha_prior") or 0.0), prov.get("tie") or "none"
+    flags += f" --alpha-prior {w:g}"
     if prov.get("alpha_ref"):
         flags += f" --alpha-ref {prov['alpha_ref']}"
-    if prov.get("spring_prior"):
-        flags += f" --spring-prior {prov['spring_prior']:g}"
-    if prov.get("tie"):
-        flags += f" --tie {prov['tie']}"
-    if prov.get("contacts"):
-        flags += f" --contacts {prov['contacts']}"
+    elif w > 0 or tie != "none":
+        flags += " --alpha-ref uniform"
+    flags += f" --spring-prior {float(prov.get('spring_prior') or 0.0):g} --tie {tie}"
+    flags += f" --contacts {prov.get('contacts') or 'central'}"
     return flags
 
 

@@ -133,7 +133,7 @@ def test_compose_learn_end_to_end(tmp_path):
     clip = Path(__file__).resolve().parents[2] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
     out = tmp_path / "w.yaml"
     assert main(["learn", str(clip), "--frames", "64:201", "--max-iter", "3", "--alpha-floor", "0.2",
-                 "-o", str(out)]) == 0
+                 "--alpha-prior", "0", "--spring-prior", "0", "--tie", "none", "-o", str(out)]) == 0
     st = load_style(out)
     assert st.provenance.clip == clip.name and st.provenance.frames == "64:201"
     assert st.alpha.min() >= 0.2 / N_JOINT - 1e-9
@@ -152,8 +152,9 @@ def test_learned_header_repeats_non_default_options():
     prov = {"counterexamples": "spacetime solves of 150 IPOPT iterations", "hessian": "exact",
             "alpha_floor": 0.6 / N_JOINT}
     flags = _option_flags(prov)
-    assert flags == " --counterexamples ipopt --hessian exact --alpha-floor 0.6"
-    assert _option_flags({"counterexamples": "local (one Gauss-Newton step from X_T)"}) == ""
+    plain = " --alpha-prior 0 --spring-prior 0 --tie none --contacts central"
+    assert flags == " --counterexamples ipopt --hessian exact --alpha-floor 0.6" + plain
+    assert _option_flags({"counterexamples": "local (one Gauss-Newton step from X_T)"}) == plain
     ap = argparse.ArgumentParser()
     register(ap.add_subparsers())
     a = ap.parse_args(["learn", "c.bvh", "--frames", "1:9", "-o", "s.yaml", *flags.split()])

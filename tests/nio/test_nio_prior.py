@@ -71,9 +71,20 @@ def test_model_step_holds_ties_and_follows_the_prior_gradient():
 def test_learn_header_names_the_prior_tie_and_contact_options():
     from schedules.cli.learn import _option_flags
 
-    assert _option_flags({}) == ""
+    plain = " --alpha-prior 0 --spring-prior 0 --tie none --contacts central"
+    assert _option_flags({}) == plain  # a style learned before round 14: no prior, central contacts
     flags = _option_flags({"alpha_prior": 1.0, "tie": "lr", "contacts": "onesided"})
-    assert flags == " --alpha-prior 1 --tie lr --contacts onesided"
+    assert flags == " --alpha-prior 1 --alpha-ref uniform --spring-prior 0 --tie lr --contacts onesided"
+    import argparse
+
+    from schedules.cli.learn import DEFAULTS, register
+    ap = argparse.ArgumentParser()
+    register(ap.add_subparsers())
+    a = ap.parse_args(["learn", "c.bvh", "--frames", "1:9", "-o", "s.yaml"])
+    assert (a.alpha_prior, a.spring_prior, a.tie, a.contacts) == (0.1, 0.1, "coarse", "onesided") == \
+        tuple(DEFAULTS[k] for k in ("alpha_prior", "spring_prior", "tie", "contacts"))
+    a = ap.parse_args(["learn", "c.bvh", "--frames", "1:9", "-o", "s.yaml", *plain.split()])
+    assert (a.alpha_prior, a.spring_prior, a.tie, a.contacts, a.alpha_ref) == (0.0, 0.0, "none", "central", None)
 
 
 def test_learn_rejects_a_negative_prior_before_reading_the_clip(tmp_path):
@@ -196,7 +207,7 @@ def test_learn_header_names_the_reference_and_spring_prior():
     from schedules.cli.learn import _option_flags
 
     flags = _option_flags({"alpha_prior": 0.3, "alpha_ref": "strength", "spring_prior": 1.0, "tie": "coarse"})
-    assert flags == " --alpha-prior 0.3 --alpha-ref strength --spring-prior 1 --tie coarse"
+    assert flags == " --alpha-prior 0.3 --alpha-ref strength --spring-prior 1 --tie coarse --contacts central"
 
 
 @pytest.mark.parametrize("extra, message", [(["--spring-prior", "-1"], "--spring-prior -1"),
