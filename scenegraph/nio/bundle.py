@@ -20,7 +20,7 @@ from scenegraph.nio.prior import ALPHA_MIN, Prior, tie_average
 from scenegraph.nio.records import History, IterationRecord, NIOResult, Problem
 from scenegraph.nio.theta import ALPHA, project, style_from_theta, theta_bounds, theta_scales
 
-__all__ = ["run_bundle", "model_step", "cut"]
+__all__ = ["run_bundle", "model_step", "cut", "trust_scales", "ALPHA_TRUST"]
 
 
 def cut(nio: Problem, theta: np.ndarray, motion: Motion, ET: float, gT: np.ndarray):
@@ -79,6 +79,23 @@ def model_step(theta: np.ndarray, cuts: list, radius: float, scales: np.ndarray,
     return theta + d, float(r.x[2 * n:].sum()) + (0.0 if lin is None else float(lin[0] + gP @ d))
 
 
+ALPHA_TRUST = ("absolute", "reference")
+
+
+def trust_scales(scales: np.ndarray, alpha_trust: str = "absolute", alpha_ref: np.ndarray | None = None) -> np.ndarray:
+    """The trust box's per-component sizes (θ's units; the box is radius × these): ``scales``
+    (:func:`.theta.theta_scales`, α by 1/M) for "absolute"; for "reference" α_j by α_ref,j
+    (default 1/M), so a step of radius r changes every α by at most the fraction r of its
+    reference — at most ln(1 ± r) in the log-normal prior's units, whatever the joint."""
+    if alpha_trust not in ALPHA_TRUST:
+        raise ValueError(f"alpha_trust {alpha_trust!r}: one of {', '.join(ALPHA_TRUST)}")
+    box = np.asarray(scales, float).copy()
+    if alpha_trust == "reference":
+        m = ALPHA.stop - ALPHA.start
+        box[ALPHA] = np.full(m, 1.0 / m) if alpha_ref is None else np.asarray(alpha_ref, float)
+    return box
+
+
 def _per_clip(seeds, n: int) -> list[list[Motion]]:
     """Seed motions per clip: one clip's seeds may be given as a plain tuple of motions."""
     seeds = list(seeds)
@@ -94,7 +111,7 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
                max_cuts: int = 40, max_tries: int = 4, callback: Callable[[IterationRecord], None] | None = None,
                seeds=(), prior_weight: float = 0.0, ties=(), alpha_ref: np.ndarray | None = None,
                spring_weight: float = 0.0, spring_ref: np.ndarray | None = None,
-               tie_w: np.ndarray | None = None) -> NIOResult:
+               tie_w: np.ndarray | None = None, alpha_trust: str = "absolute") -> NIOResult:
     """Minimise Σ_c G_c + D (+ P) from θ0 by the bundle method.
 
     ``nio``: a :class:`.multi.MultiNIO` (several clips) or one NIO problem (run as the
@@ -120,6 +137,14 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
     syntheses from a neutral initial motion under θ0) that start the bundle as
     counterexamples — a tuple of motions (one clip) or one tuple per clip.
 
+    ``alpha_trust``: the trust box of α — "absolute" (every α_j by r/M, the paper's scale) or
+    "reference" (α_j by r·α_ref,j: the same *relative* change for every joint, the geometry of
+    the log-normal prior).  With a strength reference (α_ref 26× below 1/M at hip, knee, ankle
+    and trunk) an absolute box lets a first step change those α by up to 78 % of α_ref at
+    r = 0.03, and the LP sees the prior only by its tangent, which is zero at the prior's
+    centre θ0: at W = 1 every trial's true prior cost exceeded its decrease of G and no step was
+    accepted (round 13; docs/learning.md).  With a uniform reference both are the same box.
+
     Stop: G + D below ``g_abs`` × its initial value; a relative decrease below ``rtol`` or
     no accepted step in ``patience`` iterations; or ``max_iter`` iterations (a safety net,
     reported as such).
@@ -139,6 +164,7 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
         th[ALPHA] = np.maximum(th[ALPHA], floor)
         th[ALPHA] /= th[ALPHA].sum()
     scales = theta_scales(style_from_theta(th))
+    box = trust_scales(scales, alpha_trust, alpha_ref)  # the LP's box; the spring prior keeps `scales`
     k_ref = th.copy() if spring_ref is None else np.asarray(spring_ref, float)
     bundle = _per_clip(seeds, nc)
     cur = first = prob.evaluate(th, bundle)
@@ -186,7 +212,7 @@ def run_bundle(nio: Problem, theta0: np.ndarray, *, max_iter: int = 30, rtol: fl
         tries = 0
         accepted = False
         while r >= min_trust and tries < max_tries:
-            th_new, model = model_step(cur.theta, cuts, r, scales, floor, ties,
+            th_new, model = model_step(cur.theta, cuts, r, box, floor, ties,
                                        P(cur.theta) if P.active else None, groups, tie_w)
             pred = prev - model
             if pred <= 1e-12 * max(prev, 1e-300):

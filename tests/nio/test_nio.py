@@ -133,7 +133,7 @@ def test_compose_learn_end_to_end(tmp_path):
     clip = Path(__file__).resolve().parents[2] / "scenarios" / "clips" / "walk_neutral_cmu_07_01.bvh"
     out = tmp_path / "w.yaml"
     assert main(["learn", str(clip), "--frames", "64:201", "--max-iter", "3", "--alpha-floor", "0.2",
-                 "-o", str(out)]) == 0
+                 "--alpha-prior", "0", "--spring-prior", "0", "--tie", "none", "-o", str(out)]) == 0
     st = load_style(out)
     assert st.provenance.clip == clip.name and st.provenance.frames == "64:201"
     assert st.alpha.min() >= 0.2 / N_JOINT - 1e-9
@@ -152,8 +152,9 @@ def test_learned_header_repeats_non_default_options():
     prov = {"counterexamples": "spacetime solves of 150 IPOPT iterations", "hessian": "exact",
             "alpha_floor": 0.6 / N_JOINT}
     flags = _option_flags(prov)
-    assert flags == " --counterexamples ipopt --hessian exact --alpha-floor 0.6"
-    assert _option_flags({"counterexamples": "local (one Gauss-Newton step from X_T)"}) == ""
+    plain = " --alpha-prior 0 --spring-prior 0 --tie none --contacts central"
+    assert flags == " --counterexamples ipopt --hessian exact --alpha-floor 0.6" + plain
+    assert _option_flags({"counterexamples": "local (one Gauss-Newton step from X_T)"}) == plain
     ap = argparse.ArgumentParser()
     register(ap.add_subparsers())
     a = ap.parse_args(["learn", "c.bvh", "--frames", "1:9", "-o", "s.yaml", *flags.split()])
@@ -242,7 +243,9 @@ def test_seeded_counterexamples_enter_g(local_nio):
 
 def test_shipped_styles_have_provenance():
     """Every style in scenarios/styles/ was learned: provenance names a shipped clip (never an
-    _iclone one), frames, body, versions, final G and the measured re-synthesis."""
+    _iclone one), frames, body, versions, final G, and the re-synthesis where it was measured (the
+    styles re-learned in round 14 with the prior carry none: issue #18 made the held-out test the
+    measure, docs/learning.md)."""
     from pathlib import Path
 
     from scenegraph.model.style import load_style
@@ -258,7 +261,8 @@ def test_shipped_styles_have_provenance():
         assert pv.g_final is not None and pv.g_final >= 0 and pv.versions, f
         assert abs(st.alpha.sum() - 1) < 1e-6
         extra = pv.model_extra or {}
-        assert set(extra["resynth_rms_deg"]) >= {"learned", "default", "springs_off"}, f
+        if "resynth_rms_deg" in extra:  # measured by bench_nio.py --out (a smoke test since issue #18)
+            assert set(extra["resynth_rms_deg"]) >= {"learned", "default", "springs_off"}, f
         assert "compose learn" in f.read_text().splitlines()[0], f
         assert st.example is not None and len(st.example.phase_l) >= 20, f  # X_T's poses by leg phase
 

@@ -132,7 +132,8 @@ def test_learned_header_names_every_clip(tmp_path):
     st = default_style().model_copy(update={"provenance": Provenance(clip="a.bvh", frames="1:60")})
     out = tmp_path / "s.yaml"
     save_learned(SimpleNamespace(style=st), out, [("a.bvh", (1, 60)), ("b.bvh", (5, 90))], None, "adult_male")
-    assert out.read_text().splitlines()[0] == "# learned by: compose learn a.bvh:1:60 b.bvh:5:90 --body adult_male -o s.yaml"
+    assert out.read_text().splitlines()[0] == ("# learned by: compose learn a.bvh:1:60 b.bvh:5:90 --body adult_male "
+                                               "--alpha-prior 0 --spring-prior 0 --tie none --contacts central -o s.yaml")
     assert load_style(out).provenance.clip == "a.bvh"
     save_learned(SimpleNamespace(style=st), out, "a.bvh", (1, 60), "adult_male")
     assert out.read_text().splitlines()[0].startswith("# learned by: compose learn a.bvh --frames 1:60 --body")

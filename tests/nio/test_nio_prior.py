@@ -71,9 +71,20 @@ def test_model_step_holds_ties_and_follows_the_prior_gradient():
 def test_learn_header_names_the_prior_tie_and_contact_options():
     from schedules.cli.learn import _option_flags
 
-    assert _option_flags({}) == ""
+    plain = " --alpha-prior 0 --spring-prior 0 --tie none --contacts central"
+    assert _option_flags({}) == plain  # a style learned before round 14: no prior, central contacts
     flags = _option_flags({"alpha_prior": 1.0, "tie": "lr", "contacts": "onesided"})
-    assert flags == " --alpha-prior 1 --tie lr --contacts onesided"
+    assert flags == " --alpha-prior 1 --alpha-ref uniform --spring-prior 0 --tie lr --contacts onesided"
+    import argparse
+
+    from schedules.cli.learn import DEFAULTS, register
+    ap = argparse.ArgumentParser()
+    register(ap.add_subparsers())
+    a = ap.parse_args(["learn", "c.bvh", "--frames", "1:9", "-o", "s.yaml"])
+    assert (a.alpha_prior, a.spring_prior, a.tie, a.contacts) == (0.1, 0.1, "coarse", "onesided") == \
+        tuple(DEFAULTS[k] for k in ("alpha_prior", "spring_prior", "tie", "contacts"))
+    a = ap.parse_args(["learn", "c.bvh", "--frames", "1:9", "-o", "s.yaml", *plain.split()])
+    assert (a.alpha_prior, a.spring_prior, a.tie, a.contacts, a.alpha_ref) == (0.0, 0.0, "none", "central", None)
 
 
 def test_learn_rejects_a_negative_prior_before_reading_the_clip(tmp_path):
@@ -196,11 +207,12 @@ def test_learn_header_names_the_reference_and_spring_prior():
     from schedules.cli.learn import _option_flags
 
     flags = _option_flags({"alpha_prior": 0.3, "alpha_ref": "strength", "spring_prior": 1.0, "tie": "coarse"})
-    assert flags == " --alpha-prior 0.3 --alpha-ref strength --spring-prior 1 --tie coarse"
+    assert flags == " --alpha-prior 0.3 --alpha-ref strength --spring-prior 1 --tie coarse --contacts central"
 
 
 @pytest.mark.parametrize("extra, message", [(["--spring-prior", "-1"], "--spring-prior -1"),
-                                            (["--alpha-ref", "strength"], "--alpha-ref strength")])
+                                            (["--alpha-ref", "strength", "--alpha-prior", "0", "--tie", "none"],
+                                             "--alpha-ref strength")])
 def test_learn_rejects_bad_prior_options_before_reading_the_clip(tmp_path, extra, message):
     import subprocess
     import sys
@@ -243,3 +255,35 @@ def test_learn_with_strength_prior_and_coarse_ties_keeps_them():
         assert th[s + i("knee_flex_l")] == pytest.approx(th[s + i("knee_flex_r")], rel=1e-6, abs=1e-9)
     prov = res.style.provenance.model_dump()
     assert prov["alpha_ref"] == "strength" and prov["tie"] == "coarse" and prov["spring_prior"] == 0.1
+
+
+def test_reference_trust_box_bounds_the_log_change_of_every_alpha():
+    """With the strength reference an absolute box (α by r/M) lets a step of r = 0.03 move the
+    strong joints' α (reference 26× below 1/M) by ~78 % — a log change of −1.5, which the
+    log-normal prior charges ~2.3 per joint; the reference box moves every α by at most 3 %."""
+    from scenegraph.nio.bundle import trust_scales
+    from scenegraph.nio.prior import alpha_reference
+    from scenegraph.nio.theta import theta_scales
+
+    ref = alpha_reference("strength")
+    th = default_style().vector().copy()
+    th[A] = ref
+    scales = theta_scales(default_style())
+    g = np.zeros(len(th))
+    g[A] = -1.0 / ref  # a cut that pays for lowering every α in proportion to 1/α_ref
+    g[A.start + JOINT_DOF_NAMES.index("wrist_flex_l")] = 5.0
+    cuts = [(1.0, g)]
+    for mode, worst in (("absolute", 0.5), ("reference", None)):
+        box = trust_scales(scales, mode, ref)
+        new, _ = model_step(th, cuts, 0.03, box, 0.0)
+        assert new[A].sum() == pytest.approx(1.0)
+        dlog = np.abs(np.log(np.maximum(new[A], 1e-12) / ref))
+        if worst is None:
+            assert dlog.max() <= np.log(1 / 0.97) + 1e-9
+        else:
+            assert dlog.max() > worst
+    assert np.array_equal(trust_scales(scales, "absolute", ref), scales)
+    u = trust_scales(scales, "reference", None)
+    assert np.allclose(u[A], 1.0 / N_JOINT) and np.allclose(u, scales)  # uniform: the same box
+    with pytest.raises(ValueError, match="alpha_trust"):
+        trust_scales(scales, "log")
