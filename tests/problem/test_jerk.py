@@ -172,3 +172,16 @@ def test_handhold_bodies_stay_apart_with_the_jerk_penalty(tmp_path, monkeypatch)
     assert rep["all_goals_hold"] and rep["all_audits_pass"]
     assert rep["stage_audit"]["summary"]["interpenetration_max_cm"] <= 0.5
     assert rep["stage_audit"]["passes"]
+
+
+def test_the_transcription_leaves_the_contact_changes_knots_out():
+    """A subproblem with footsteps and a flight: its jerk rows are those of the knots that
+    :func:`exempt_knots` leaves, for the footsteps' and the flight's ends."""
+    m = _motion(lambda v: np.r_[np.zeros(6), 0.3 * np.sin(7 * v) * np.ones(N_DOF - 6)])
+    steps = (Footstep("r", (0.0, -0.1), 0.0, 0.45, heel=None, ball=(0.0, 1.0)),
+             Footstep("l", (0.8, 0.1), 0.75, 1.2, heel=None, ball=(0.0, 1.0)))
+    sp = Subproblem(CH, STYLE, m, steps, flights=((0.45, 0.75),), free=frozenset({"q"}), dynamics="relaxed")
+    a, b = transcribe(sp, derivatives=False), transcribe(replace(sp, jerk_weight=0.01), derivatives=False)
+    n_ex = int(exempt_knots(m, (0.45, 0.75)).sum())
+    assert n_ex == 4  # two changes inside the motion, inside two knot intervals apart
+    assert b.rho_extra_fn.size1_out(0) - a.rho_extra_fn.size1_out(0) == (K - 4 - n_ex) * N_JOINT
