@@ -36,7 +36,9 @@ of motion must hold between the points too, not only at them:
 Jerk penalty (``Subproblem.jerk_weight``, full steps; :mod:`.jerk`): the jump of every joint's
 third derivative at each knot, as the generalised force it amounts to, is a least-squares row — a
 cubic spline can otherwise zig-zag its acceleration from knot to knot (the arms flailing at 1000+
-rad/s² where the style makes their torques almost free).
+rad/s² where the style makes their torques almost free).  The knots next to a planned contact
+change (a footstep's first touch-down and last lift-off, a flight's ends: :func:`.jerk.contact_events`)
+carry no row: there the true motion's jerk jumps.
 
 ``dense_dynamics=False`` gives the round-8 transcription (uniform points plus contact ends,
 forces only at the points, trapezoid weights), kept for comparison (tests/problem/
@@ -80,7 +82,7 @@ from scenegraph.model.residual import (CONTACT_HANDLES, FORCE_HANDLES, N_THETA, 
                         kernel_hessian, theta_kernel_vector)
 from scenegraph.problem.flight import flight_constraints, flight_groups, flight_hessian, flight_jacobian, momenta_fn
 from scenegraph.problem.gram import dynamics_gauss_newton
-from scenegraph.problem.jerk import jerk_rows
+from scenegraph.problem.jerk import contact_events, jerk_rows
 from scenegraph.problem.no_slip import no_slip_residuals
 from scenegraph.problem.stance_frame import stance_frame_residuals
 from scenegraph.problem.subproblem import HESSIAN_MODES, Subproblem
@@ -597,7 +599,7 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
         rho_dyn = ca.vec(P_flat - P_fixed) * KIN_WEIGHT
     rho_extra = [1e-3 * xL]  # tiny λ regularisation keeps the contact split well posed
     if sp.jerk_weight > 0 and sp.dynamics != "kinematic":  # no ringing between the points (.jerk)
-        rj = jerk_rows(ch, m, P, mask, sp.jerk_weight)
+        rj = jerk_rows(ch, m, P, mask, sp.jerk_weight, events=contact_events(sp.footsteps, sp.flights))
         if rj is not None:
             rho_extra.append(rj)
 

@@ -10,7 +10,9 @@ from scenegraph.model.body import DOF_NAMES, G, N_DOF, N_JOINT, make_character, 
 from scenegraph.model.motion import Motion, basis
 from scenegraph.model.style import default_style
 from scenegraph.problem import Subproblem, transcribe
-from scenegraph.problem.jerk import dof_inertia, jerk_energy, jerk_rows, knot_jump_matrix
+from scenegraph.model.footsteps import Footstep
+from scenegraph.problem.jerk import (contact_events, dof_inertia, exempt_knots, jerk_energy, jerk_rows,
+                                    knot_jump_matrix)
 from scenegraph.problem.transcription import OBJ_SCALE
 
 CH = make_character()
@@ -94,6 +96,36 @@ def test_a_window_penalises_only_the_knots_its_free_points_move():
     assert jerk_rows(CH, m, ca.DM(np.asarray(m.ctrl, float)), mask, 0.0) is None
 
 
+def test_contact_events_are_stance_ends_and_flight_ends():
+    """A footstep's first touch-down and last lift-off (any handle), a flight's ends; once each."""
+    steps = (Footstep("r", (0.0, -0.1), 0.0, 0.4, heel=(0.0, 0.5), ball=(0.25, 1.0)),
+             Footstep("l", (1.0, 0.1), 0.5, 0.9, heel=None, ball=(0.0, 1.0)))
+    assert contact_events(steps, ((0.4, 0.5),)) == (0.0, 0.4, 0.5, 0.9)
+
+
+def test_knots_next_to_a_contact_change_carry_no_row():
+    """A change inside a knot interval exempts its two bounding knots (one when it lies on a knot);
+    the rows and the energy leave exactly those knots out, and the rest is unchanged."""
+    m = _motion(lambda v: np.r_[np.zeros(6), 0.3 * np.sin(7 * v) * np.ones(N_DOF - 6)])  # 1.2 s, K − 3 = 11 intervals
+    _, s_k = knot_jump_matrix(K)
+    h = 1.2 / (K - 3)
+    inside, on_knot = 1.2 * (s_k[3] + 0.4 / (K - 3)), 1.2 * s_k[6]  # world s (uniform warp)
+    ex = exempt_knots(m, (inside, on_knot, 5.0))  # 5.0 s: outside the motion, ignored
+    assert list(np.flatnonzero(ex)) == [3, 4, 6]
+    assert not exempt_knots(m, ()).any() and not exempt_knots(m, (h * 0.5 + 9.0,)).any()
+    ctrl = ca.DM(np.asarray(m.ctrl, float))
+    full, cut = jerk_rows(CH, m, ctrl, np.ones(K, bool), 1.0), jerk_rows(CH, m, ctrl, np.ones(K, bool), 1.0,
+                                                                        events=(inside, on_knot))
+    assert full.shape[0] - cut.shape[0] == 3 * N_JOINT
+    rows = np.asarray(ca.evalf(full)).reshape(N_JOINT, -1)  # column-major vec of (knots, joints)
+    kept = np.asarray(ca.evalf(cut)).reshape(N_JOINT, -1)
+    np.testing.assert_allclose(kept, rows[:, ~ex[:len(s_k)]], rtol=1e-12)
+    mg = CH.total_mass * G
+    np.testing.assert_allclose(jerk_energy(CH, m, 1.0, events=(inside, on_knot)), mg ** 2 * float(ca.sumsqr(cut)),
+                               rtol=1e-9)
+    assert jerk_energy(CH, m, 1.0, events=(inside, on_knot)) < jerk_energy(CH, m, 1.0)
+
+
 def test_lowering_sets_the_weight_in_full_steps_only():
     from scenarios.loader import load_scenario
     from scenegraph.problem.jerk import JERK_WEIGHT
@@ -140,3 +172,16 @@ def test_handhold_bodies_stay_apart_with_the_jerk_penalty(tmp_path, monkeypatch)
     assert rep["all_goals_hold"] and rep["all_audits_pass"]
     assert rep["stage_audit"]["summary"]["interpenetration_max_cm"] <= 0.5
     assert rep["stage_audit"]["passes"]
+
+
+def test_the_transcription_leaves_the_contact_changes_knots_out():
+    """A subproblem with footsteps and a flight: its jerk rows are those of the knots that
+    :func:`exempt_knots` leaves, for the footsteps' and the flight's ends."""
+    m = _motion(lambda v: np.r_[np.zeros(6), 0.3 * np.sin(7 * v) * np.ones(N_DOF - 6)])
+    steps = (Footstep("r", (0.0, -0.1), 0.0, 0.45, heel=None, ball=(0.0, 1.0)),
+             Footstep("l", (0.8, 0.1), 0.75, 1.2, heel=None, ball=(0.0, 1.0)))
+    sp = Subproblem(CH, STYLE, m, steps, flights=((0.45, 0.75),), free=frozenset({"q"}), dynamics="relaxed")
+    a, b = transcribe(sp, derivatives=False), transcribe(replace(sp, jerk_weight=0.01), derivatives=False)
+    n_ex = int(exempt_knots(m, (0.45, 0.75)).sum())
+    assert n_ex == 4  # two changes inside the motion, inside two knot intervals apart
+    assert b.rho_extra_fn.size1_out(0) - a.rho_extra_fn.size1_out(0) == (K - 4 - n_ex) * N_JOINT
