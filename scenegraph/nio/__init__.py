@@ -12,6 +12,7 @@ profiled out by a bound-constrained least squares, for X_T and every counterexam
 
 The package, in the order of the computation (each module imports only those above it):
 
+- :mod:`.plausibility`, :mod:`.slide`: a motion's best-fit root residual and its stance sliding (mm), model only;
 - :mod:`.theta`: θ by name (``style.THETA_LAYOUT``), its bounds and projection, D (Eq. 18);
 - :mod:`.prior`: the log-normal prior on α and the left/right / joint-group ties (issue #18);
 - :mod:`.energy`: E(X; θ) = the NLP objective, ∂E/∂θ and the energy-optimal contact forces (``EnergyModel``);

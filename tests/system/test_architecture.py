@@ -222,7 +222,7 @@ def test_compose_schedule_does_not_import_casadi():
 
 # the order of the computation in scenegraph/nio/ (its __init__ docstring): each module may
 # import only the modules before it
-NIO_ORDER = ("plausibility", "theta", "prior", "energy", "counterexamples", "records", "multi", "initial", "bundle", "gradient", "problem",
+NIO_ORDER = ("plausibility", "slide", "theta", "prior", "energy", "counterexamples", "records", "multi", "initial", "bundle", "gradient", "problem",
              "target", "resynthesis", "learn", "heldout", "sensitivity", "ranking")
 
 
