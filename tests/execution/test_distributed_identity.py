@@ -37,6 +37,8 @@ goals:
       - {foot: r, position: [-0.70, -0.09], time: [0.00, 0.11]}
       - {foot: l, position: [0.00, 0.09], time: [0.00, 0.6]}
       - {foot: r, position: [0.70, -0.09], time: [0.55, 0.6]}
+schedule:
+  timewarp: true               # a timing step and a full step: two steps, one depending on the other
 """
 
 
