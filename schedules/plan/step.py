@@ -304,7 +304,7 @@ class Schedule:
         order = self.order()
         index = {s.id: i + 1 for i, s in enumerate(order)}
         lines = [f"schedule for scenario {self.scenario!r}: {len(order)} steps in "
-                 f"{len(self.groups)} independent branch(es); kinds: {', '.join(sorted(self.kinds))}"]
+                 f"{len(self.groups)} independent branch(es); kinds: {', '.join(sorted(self.kinds)) or 'one full step per subproblem'}"]
         for n in self.notes:
             lines.append(f"  note: {n}")
         for g in self.groups:

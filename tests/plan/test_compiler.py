@@ -476,3 +476,11 @@ def test_schedule_json_round_trips(capsys):
     assert main(["schedule", "walk_to_run", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert [s["id"] for s in data["steps"]] == [s.id for s in _compile("walk_to_run").order()]
+
+
+def test_a_schedule_without_schedule_kinds_says_what_it_runs():
+    """A plain walk has no timing step since round 14 (and so no schedule kind): `compose schedule`
+    says it runs one full step per subproblem instead of printing an empty list."""
+    head = compile_schedule(load_scenario("walk")).to_text().splitlines()[0]
+    assert head.endswith("kinds: one full step per subproblem"), head
+    assert "kinds: one full step" not in compile_schedule(load_scenario("handhold")).to_text().splitlines()[0]
