@@ -26,10 +26,11 @@ from scenarios.errors import InputError
 from scenarios.schema import Scenario, WalkToGoal, joint_dofs
 
 from scenegraph.model.body import PRESETS, Character, make_character
-from scenegraph.model.footsteps import Footstep, foot_length
+from scenegraph.model.footsteps import Footstep, airborne_gaps, foot_length
 from scenegraph.model.gait import initial_motion, style_gait
 from scenegraph.world.footplan import RANK_FOOTPRINTS, RANK_CHASE, FootContext, plan_footsteps
 from scenegraph.model.ground import FLAT, Ground, ground_from_environment
+from scenegraph.model.knot_warp import align_knots
 from scenegraph.model.motion import Motion
 from scenegraph.world.goals import Coupling, GoalRecord, coupling_records, goal_records
 from scenegraph.world.goals.tackle import TACKLE_CONTACT_TOL
@@ -271,6 +272,7 @@ def build_scene(scn: Scenario) -> Scene:
         run_from = change[0] if change is not None and change[2] == "run" else plan.run
         motion = plan.initial(ch) if plan.initial is not None else \
             initial_motion(ch, steps, 0.0, T, ground=ground, run=run_from, example=_example(scn, spec, styles))
+        motion = align_knots(motion, [t for gap in airborne_gaps(steps) for t in gap])  # q̈ may kink at flight ends
         chars.append(CharacterState(spec.name, ch, tuple(styles), steps, motion, start, plan=motion))
     chars.sort(key=lambda c: scn.character_names.index(c.name))
     bounds = None
