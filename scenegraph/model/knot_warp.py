@@ -74,4 +74,4 @@ def align_knots(motion: Motion, events) -> Motion:
         return motion
     t_d = basis(n, s_d) @ w
     q_d = motion.canonical(motion.to_canonical(t_d))
-    return Motion(fit_spline(s_d, q_d, n), w)
+    return Motion(fit_spline(s_d, q_d, n, smooth=1e-9), w)
