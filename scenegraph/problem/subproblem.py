@@ -138,6 +138,8 @@ class Subproblem:
     contact_hz: float = 120.0  # samples per second of those two terms (world s of the initial motion)
     jerk_weight: float = 0.0  # dimensionless: the knot-to-knot jump of the jerk as a generalised force,
     # integrated over time (scenegraph/problem/jerk.py; 0: off; full and relaxed dynamics)
+    joint_speed_limit: bool = True  # joints under the human ceilings of scenegraph/model/joint_speed.py
+    # (full dynamics, held timewarp)
     window_only: bool = False  # transcribe only the collocation points the window's free control
     # points reach (a window's cost independent of the scene's length); receding windows use it —
     # in walk_to_run's first window it ended "Error in step computation" where the whole-scene
