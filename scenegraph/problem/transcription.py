@@ -741,8 +741,8 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     if sp.joint_speed_limit and sp.dynamics == "full" and not warp_free:
         pairs = np.flatnonzero(mask[:-1] | mask[1:])
         if len(pairs):
-            scale, bound = speed_rows(K, np.asarray(m.warp, float), pairs)
-            d = ca.vertcat(*[scale[r] * (P[i + 1, N_ROOT:] - P[i, N_ROOT:]) for r, i in enumerate(pairs)])
+            dscale, bound = speed_rows(K, np.asarray(m.warp, float), pairs)
+            d = ca.vertcat(*[float(dscale[r]) * (P[i + 1, N_ROOT:] - P[i, N_ROOT:]) for r, i in enumerate(pairs)])
             add("joint_speed", d, -bound.ravel(order="F"), bound.ravel(order="F"), "ineq")  # vec: column-major
     if sp.cyclic:  # thesis §2.2.2: the cycle ends where it began, moved along the ground
         qs, qe = ca.mtimes(_sparse(basis(K, [0.0], 0)), P).T, ca.mtimes(_sparse(basis(K, [1.0], 0)), P).T
