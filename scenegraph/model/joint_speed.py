@@ -19,7 +19,9 @@ The rows.  A clamped cubic B-spline's derivative is a quadratic B-spline with co
 d_i = 3 (c_{i+1} − c_i) / (u_{i+4} − u_{i+1}) (u the knot vector), and a B-spline lies in the
 hull of its control points; so |d_i| ≤ v_max · min T' over d_i's support keeps |q̇| = |q'| / T'
 under v_max everywhere (conservative: the hull bound, not the curve's maximum).  Linear in the
-control points for a held timewarp.
+control points for a held timewarp.  The transcription makes them a one-sided least-squares term
+(zero under the ceiling), not inequality rows: IPOPT's barrier terms of ~800 rows that never
+bind pulled a walk toward standing still (E 169 → 6322 in tests/problem/test_spacetime.py).
 """
 from __future__ import annotations
 
@@ -28,7 +30,10 @@ import numpy as np
 from scenegraph.model.body import DOF_NAMES, N_ROOT
 from scenegraph.model.motion import basis, clamped_knots
 
-__all__ = ["MAX_JOINT_SPEED", "max_speed", "speed_rows"]
+__all__ = ["MAX_JOINT_SPEED", "SPEED_WEIGHT", "max_speed", "speed_rows"]
+
+SPEED_WEIGHT = 1.0  # per (rad/s)² over a ceiling, per control-point pair, in the objective's units
+# (residuals of body weight: 1 rad/s over costs as much as 1 bw of root residual at one point)
 
 # rad/s, by the name's prefix (first match)
 MAX_JOINT_SPEED: tuple[tuple[str, float], ...] = (

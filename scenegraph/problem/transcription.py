@@ -75,7 +75,7 @@ import numpy as np
 from scenegraph.model.body import G, N_DOF, N_JOINT, N_ROOT, Character
 from scenegraph.model.clearance import sphere_centers_fn
 from scenegraph.model.footsteps import Footstep, contact_points
-from scenegraph.model.joint_speed import speed_rows
+from scenegraph.model.joint_speed import SPEED_WEIGHT, max_speed, speed_rows
 from scenegraph.model.dynamics import shoe_force
 from scenegraph.model.motion import basis
 from scenegraph.model.shoe import SIDES, gate_breaks, shoe_gate
@@ -741,9 +741,12 @@ def transcribe(sp: Subproblem, *, derivatives: bool = True) -> NLP:
     if sp.joint_speed_limit and sp.dynamics == "full" and not warp_free:
         pairs = np.flatnonzero(mask[:-1] | mask[1:])
         if len(pairs):
+            # one-sided least squares, zero under the ceiling: as rows, their barrier terms pulled a walk
+            # that never comes near the ceilings toward standing still (E 169 -> 6322, docs/formulation.md)
             dscale, bound = speed_rows(K, np.asarray(m.warp, float), pairs)
             d = ca.vertcat(*[float(dscale[r]) * (P[i + 1, N_ROOT:] - P[i, N_ROOT:]) for r, i in enumerate(pairs)])
-            add("joint_speed", d, -bound.ravel(order="F"), bound.ravel(order="F"), "ineq")  # vec: column-major
+            over = ca.fmax(0, ca.fabs(d) - ca.DM(bound)) / ca.DM(bound / max_speed())  # rad/s over the ceiling
+            rho_extra.append(np.sqrt(SPEED_WEIGHT) * over)
     if sp.cyclic:  # thesis §2.2.2: the cycle ends where it began, moved along the ground
         qs, qe = ca.mtimes(_sparse(basis(K, [0.0], 0)), P).T, ca.mtimes(_sparse(basis(K, [1.0], 0)), P).T
         vs = ca.mtimes(_sparse(basis(K, [0.0], 1)), P).T / ca.mtimes(_sparse(basis(nW, [0.0], 1)), warp)
