@@ -33,10 +33,11 @@ STALL_VIOL = 1e-5  # worst constraint violation (m, or the constraint's unit) of
 # IPOPT told to start *at* the initial motion (a Subproblem's ``ipopt_options``): variables pushed
 # 1e-6 (not 1e-2) off their bounds, the bound multipliers 1e-6, the constraint multipliers the
 # nlpsol's λ0 (zero) instead of IPOPT's least-squares estimate, and μ from 1e-3 (not 0.1); the
-# barrier rule stays the project's adaptive one.  Measured on broad_jump's full step (round 15,
-# docs/dynamic-motion.md "Speed (round 15)"): the first phase no longer raises the inertia
-# correction to 1e10 (max 1e3.4), the objective is below 100 at iteration 46 instead of 91 —
-# but IPOPT's stopping test is then not met before the 300 cap (at 38 % less energy).
+# barrier rule stays the project's adaptive one.  Measured on the jumps' full steps (round 15,
+# docs/dynamic-motion.md "Speed (round 15)"): no inertia-correction blow-up in the first phase
+# (broad_jump δ_w ≤ 1e3.4, not 1e11), the default's final objective reached in about half the
+# iterations; then broad_jump runs to the 300 cap (E −38 %) and the twists stop 141–156 iterations
+# sooner at 10–35 % more energy with the stage CoP failing: not used by default (lower.JUMP_FULL_IPOPT).
 START_AT_GUESS = (("warm_start_init_point", "yes"), ("mu_init", 1e-3),
                   ("warm_start_bound_push", 1e-6), ("warm_start_bound_frac", 1e-6),
                   ("warm_start_mult_bound_push", 1e-6))

@@ -124,7 +124,8 @@ FULL_STEP_JERK = 0.0
 # Extra IPOPT options of a full step that states a jump goal's flight (broad_jump, twist_jump, hopscotch;
 # not a run's gait flights), as (name, value) pairs on Subproblem.ipopt_options: the per-step switch
 # measured in round 15 (scenegraph.problem.solver.START_AT_GUESS; docs/dynamic-motion.md "Speed (round
-# 15)").  Empty: the project's IPOPT defaults (adaptive μ from 0.1, bound_push 1e-2).
+# 15)").  Empty: the project's IPOPT defaults (adaptive μ from 0.1, bound_push 1e-2).  Measured: monotone μ,
+# mu_oracle probing and START_AT_GUESS each lose on at least one of broad_jump, twist_jump, a 60° twist.
 JUMP_FULL_IPOPT: tuple = ()
 
 
