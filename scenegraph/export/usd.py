@@ -55,7 +55,8 @@ from scenarios.atomic import atomic_path
 from scenarios.errors import ComposeError, InputError
 from scenarios.versions import compose_version
 
-from scenegraph.model.body import N_DOF, Character, drawn_shapes, keel_points, standing_pose
+from scenegraph.model.body import (CARRIED_DENSITY, CARRIED_SHAPE, N_DOF, Character, box_inertia,  # noqa: F401
+                                   carried_half_extents, drawn_shapes, keel_points, standing_pose)
 from scenegraph.model.kinematics import numeric_fk
 from scenegraph.model.rotations import quat_from_matrix
 
@@ -297,14 +298,6 @@ def box_mesh(center, half_extents):
     return c + U * h, U / np.sqrt(3.0), [4] * 6, [i for f in faces for i in f]
 
 
-CARRIED_DENSITY = 300.0  # kg/m^3: the drawn size of a carried load (a packed suitcase)
-CARRIED_SHAPE = (1.33, 0.4, 1.0)  # a suitcase's proportions: long along x (forward), thin sideways
-
-
-def carried_half_extents(mass: float) -> np.ndarray:
-    """Half extents (m, body axes) of the box drawn for a carried load of ``mass`` kg."""
-    shape = np.array(CARRIED_SHAPE)
-    return 0.5 * shape * (max(mass, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
 
 
 def _to_vt(value: Any):
@@ -507,11 +500,14 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         prim = mesh.GetPrim()
         prim.CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(b.name)
         prim.CreateAttribute("compose:shape", Sdf.ValueTypeNames.String, custom=True).Set(shape.kind)
-        # the dynamics' own numbers: mass, centre, the ellipsoid's inertia (Body.inertia)
-        mass_api(prim, shape.mass, shape.com, b.inertia, Rbb, pbb)
+        # the dynamics' own numbers: mass, centre, the ellipsoid's inertia (Body.inertia; a body
+        # with a load: its own mass's ellipsoid, the load is its own prim below)
+        a_, b_, c_ = b.semi_axes
+        own_I = b.inertia if not b.inertia_extra else shape.mass / 5.0 * np.diag([b_ * b_ + c_ * c_, a_ * a_ + c_ * c_, a_ * a_ + b_ * b_])
+        mass_api(prim, shape.mass, shape.com, own_I, Rbb, pbb)
         _bind_material(prim, mat)
     # Carried loads (with_extra_mass, e.g. a suitcase): a box centred on the handle that holds
-    # it, skinned to that handle's joint, with the load's mass (the dynamics: a point mass).
+    # it, skinned to that handle's joint, with the load's mass and inertia (the dynamics' box).
     body_index = {b.name: i for i, b in enumerate(ch.bodies)}
     for n, (handle, extra) in enumerate(ch.loads):
         h = ch.handle(handle)
@@ -524,7 +520,7 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         prim = mesh.GetPrim()
         prim.CreateAttribute("compose:carried", Sdf.ValueTypeNames.String, custom=True).Set(handle)
         prim.CreateAttribute("compose:body", Sdf.ValueTypeNames.String, custom=True).Set(h.body)
-        mass_api(prim, extra, h.point, np.zeros((3, 3)), Rbb, pbb)
+        mass_api(prim, extra, h.point, box_inertia(extra, half), Rbb, pbb)
         _bind_material(prim, mat)
 
 

@@ -33,7 +33,7 @@ class Audit:
     footstep_error_max: float  # m, planted handle distance from its footprint
     penetration_max: float  # m, depth of the lowest foot handle below the ground (vertical, under the handle)
     friction_violation_max: float  # N, how far a contact force leaves the friction cone (about the ground normal)
-    foot_sliding_max: float  # m/s, planted handle speed
+    planted_speed_max: float  # m/s: the largest horizontal speed of a planted handle (a speed, not a slide distance; was foot_sliding_max)
     joint_limit_violation_max: float  # rad
     energy: float  # Σ α Q_m² dt over the audited times
     dense_residual_max: float = 0.0  # body weights: largest |Q_0 force| at any ``rate`` Hz frame (dense_audit)
@@ -73,7 +73,7 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
     # hp[:, j, k]: handle j at time k
     above = hp[2] - (0.0 if ground.flat else ground.height(hp[0], hp[1]))  # (handles, times)
     pen = max(0.0, float(-np.min(above)))
-    foot_err, slide = 0.0, 0.0
+    foot_err, planted_speed = 0.0, 0.0
     for step in footsteps:
         for handle, (ta, tb), xy in contact_points(ch, step, None, ground):
             j = names.index(handle)
@@ -85,7 +85,7 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
             foot_err = max(foot_err, float(err.max()))
             if inside.sum() > 1:
                 v = np.gradient(hp[:2, j, inside], t[inside], axis=1)
-                slide = max(slide, float(np.linalg.norm(v, axis=0).max()))
+                planted_speed = max(planted_speed, float(np.linalg.norm(v, axis=0).max()))
     lim = max(0.0, float(np.max(np.maximum(ch.lower - q, q - ch.upper)[:, N_ROOT:])))
 
     # equations of motion at the contact-force times (or the audit grid without contact)
@@ -122,5 +122,5 @@ def audit_motion(ch: Character, style: Style, motion: Motion, footsteps: tuple[F
     energy = float(np.sum(np.asarray(style.alpha)[:, None] * Q[:-N_ROOT] ** 2 * dt))
     mg = ch.total_mass * G
     d = dense_residual(ch, style, motion, footsteps, cf, rate, ground, shoe_gate)
-    return Audit(rms, float(np.abs(root).max()), rms / mg, foot_err, pen, max(0.0, fric), slide, lim, energy,
+    return Audit(rms, float(np.abs(root).max()), rms / mg, foot_err, pen, max(0.0, fric), planted_speed, lim, energy,
                  d.force_max_bw, d.force_rms_bw, d.flight_force_max_bw, d.worst_time())

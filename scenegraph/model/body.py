@@ -80,12 +80,17 @@ class Body:
     mass: float  # kg
     center: tuple[float, float, float]
     semi_axes: tuple[float, float, float]
+    # kg·m², body axes: what carried loads add to the uniform ellipsoid of ``mass`` (set by
+    # Character.with_extra_mass; not in the repr, so unloaded models keep their fingerprints)
+    inertia_extra: tuple | None = field(default=None, repr=False)
 
     @property
     def inertia(self) -> np.ndarray:
-        """3×3 inertia about the centre of mass, body axes (kg·m²)."""
+        """3×3 inertia about the centre of mass, body axes (kg·m²): a uniform ellipsoid of
+        ``mass`` plus ``inertia_extra`` (the carried loads' share, see with_extra_mass)."""
         a, b, c = self.semi_axes
-        return self.mass / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+        I = self.mass / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+        return I if self.inertia_extra is None else I + np.asarray(self.inertia_extra, float)
 
 
 @dataclass(frozen=True)
@@ -95,6 +100,29 @@ class Handle:
     name: str
     body: str
     point: tuple[float, float, float]
+
+
+CARRIED_DENSITY = 300.0  # kg/m^3: the drawn size of a carried load (a packed suitcase)
+CARRIED_SHAPE = (1.33, 0.4, 1.0)  # a suitcase's proportions: long along x (forward), thin sideways
+
+
+def carried_half_extents(mass: float) -> np.ndarray:
+    """Half extents (m, body axes) of the box a carried load of ``mass`` kg is (drawn and in
+    the dynamics: :meth:`Character.with_extra_mass`)."""
+    shape = np.array(CARRIED_SHAPE)
+    return 0.5 * shape * (max(mass, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
+
+
+def box_inertia(mass: float, half_extents) -> np.ndarray:
+    """3×3 inertia (kg·m²) of a uniform box about its centre, its own axes."""
+    a, b, c = (float(x) for x in half_extents)
+    return mass / 3.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+
+
+def _parallel_axis(mass: float, d) -> np.ndarray:
+    """What a mass at offset ``d`` (m) from a centre adds to the inertia about it (kg·m²)."""
+    d = np.asarray(d, float)
+    return mass * (float(d @ d) * np.eye(3) - np.outer(d, d))
 
 
 @dataclass(frozen=True)
@@ -148,18 +176,30 @@ class Character:
 
     def fingerprint(self) -> str:
         """A stable hash of everything that defines the model (for compiled-code caches)."""
-        blob = json.dumps([self.dofs, self.bodies, self.handles], default=str, sort_keys=True)
+        parts = [self.dofs, self.bodies, self.handles]
+        if self.loads:  # a load changes the inertias (Body.inertia_extra), which the repr leaves out
+            parts.append(["loads-with-inertia", self.loads])
+        blob = json.dumps(parts, default=str, sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
     def with_extra_mass(self, handle: str, mass: float) -> "Character":
-        """Add a point-like mass (kg) rigidly at a handle (e.g. a carried suitcase)."""
+        """Add a mass (kg) rigidly at a handle (e.g. a carried suitcase): the solid box the
+        stage draws for it (:func:`carried_half_extents`, centred on the handle, body axes,
+        uniform).  The body's mass, centre and inertia become those of the body and the box
+        together (parallel-axis terms included: the box's centre is 8.5 cm from the hand's
+        joint for the suitcase, and its own inertia is several times the hand's)."""
         h = self.handle(handle)
         bodies = []
         for b in self.bodies:
             if b.name == h.body:
                 m = b.mass + mass
-                c = tuple((np.array(b.center) * b.mass + np.array(h.point) * mass) / m)
-                b = replace(b, mass=m, center=c)  # inertia stays the ellipsoid's (point mass adds ~ m d², ignored)
+                c_old, p = np.array(b.center, float), np.array(h.point, float)
+                c_new = (c_old * b.mass + p * mass) / m
+                I = (b.inertia + _parallel_axis(b.mass, c_old - c_new)
+                     + box_inertia(mass, carried_half_extents(mass)) + _parallel_axis(mass, p - c_new))
+                a_, b_, c_ = b.semi_axes
+                extra = I - m / 5.0 * np.diag([b_ * b_ + c_ * c_, a_ * a_ + c_ * c_, a_ * a_ + b_ * b_])
+                b = replace(b, mass=m, center=tuple(c_new), inertia_extra=tuple(map(tuple, extra)))
             bodies.append(b)
         return replace(self, bodies=tuple(bodies), loads=self.loads + ((handle, float(mass)),))
 

@@ -1,6 +1,6 @@
 """Foot sliding of a motion as a *distance*, per planted handle and stance (held-out audit).
 
-``Audit.foot_sliding_max`` (scenegraph.model.audit) is the largest *speed* (m/s) of a planted
+``Audit.planted_speed_max`` (scenegraph.model.audit) is the largest *speed* (m/s) of a planted
 handle — a central difference at the audit's 120 Hz.  It is not how far a foot slides: a foot
 held at its footprint at 30 Hz constraint points and wobbling 2 mm between them reads
 0.2–0.4 m/s there (measured on the held-out syntheses, docs/results.md round 14) while it never
@@ -32,7 +32,7 @@ def stance_slides(ch: Character, t: np.ndarray, q: np.ndarray, footsteps: tuple[
     - ``slide_m``: largest horizontal distance of the handle from where it was at the
       interval's first sample (the stage audit's definition);
     - ``speed_max_m_s`` and ``t_speed_max``: the largest horizontal speed (central differences,
-      one-sided at the ends — what ``Audit.foot_sliding_max`` reports) and when;
+      one-sided at the ends — what ``Audit.planted_speed_max`` reports) and when;
     - ``footprint_error_max_m``: largest 3-D distance from its footprint (on the ground).
     """
     t = np.asarray(t, float)

@@ -106,14 +106,24 @@ def ground_normal(ground, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class SupportFrame:
     """One contact frame: centre of pressure (3,) m (None when the normal force is not
-    positive), its distance outside the support polygon (m), friction use |f_t| / f_n,
-    the force distance from the friction cone (N) and the normal force (N)."""
+    above the threshold), its distance outside the support polygon (m), friction use
+    |f_t| / f_n, the force distance from the friction cone (N) and the normal force (N).
+
+    :attr:`moment_outside` (N m) is the same CoP excess as a moment: the smallest change of
+    the needed moment about the support (normal force × distance outside) that would bring
+    the centre of pressure onto the polygon.  The distance is that moment divided by the
+    normal force, so at small normal forces a small moment reads as a large distance."""
 
     cop: np.ndarray | None
     outside: float
     friction_use: float
     cone_excess: float
     normal_force: float
+
+    @property
+    def moment_outside(self) -> float:
+        """Normal force × distance outside (N m); nan where no CoP is computed."""
+        return float("nan") if self.cop is None else self.normal_force * self.outside
 
 
 def contact_support(F: np.ndarray, tau_O: np.ndarray, contact_pts: np.ndarray, ground, mu: float,

@@ -160,8 +160,9 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
         valid = np.all(np.isfinite(M.force), axis=1)
         free &= valid
         fr = {k: [] for k in ("t", "contact", "free_flight", "force_bw", "torque_com_bw_m", "cop", "cop_outside_cm",
-                              "friction_use", "residual_bw")}
+                              "cop_moment_outside_bw_m", "friction_use", "residual_bw")}
         cop_out, resid, fric = [], [], []
+        worst_cop = None  # (distance cm, t, normal bw, moment bw m) of the frame farthest outside
         for k in range(T):
             if not valid[k]:
                 continue
@@ -171,22 +172,26 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
             fr["free_flight"].append(bool(free[k]))
             fr["force_bw"].append([_r(x / bw, 6) for x in F])
             fr["torque_com_bw_m"].append([_r(x / bw, 6) for x in M.torque_com[k]])
-            cop, out, use, res = None, None, None, None
+            cop, out, cmom, use, res = None, None, None, None, None
             if incontact[k]:
                 sel = hh[k] < settings.contact_tol
                 sf = contact_support(F, tO, pts[k, sel], samples.ground, settings.mu, settings.min_normal_bw * bw)
                 cop = None if sf.cop is None else [_r(x) for x in sf.cop]
                 out = None if sf.cop is None else sf.outside * 100
+                cmom = None if sf.cop is None else sf.moment_outside / bw
                 use = sf.friction_use
                 res = sf.cone_excess / bw
             elif free[k]:
                 res = float(np.linalg.norm(F)) / bw
             fr["cop"].append(cop)
             fr["cop_outside_cm"].append(_r(out, 3))
+            fr["cop_moment_outside_bw_m"].append(_r(cmom, 6))
             fr["friction_use"].append(_r(use, 3))
             fr["residual_bw"].append(_r(res))
             if out is not None:
                 cop_out.append(out)
+                if worst_cop is None or out > worst_cop[0]:
+                    worst_cop = (out, samples.times[k], sf.normal_force / bw, cmom)
             if res is not None:
                 resid.append(res)
             if use is not None and math.isfinite(use):
@@ -204,6 +209,10 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
             "gyration_radius_m": _r(rg, 6), "flight_torque_rms_bw_rg": _r(np.sqrt(np.mean(flight_tau ** 2)) if len(flight_tau) else 0.0),
             "flight_ang_momentum_drift": _r(float(np.linalg.norm(Hc.max(0) - Hc.min(0))) if len(Hc) else 0.0),
             "cop_outside_max_cm": _r(max(cop_out, default=0.0), 3),
+            "cop_outside_worst": None if worst_cop is None else {
+                "t": _r(worst_cop[1], 5), "normal_bw": _r(worst_cop[2]), "moment_bw_m": _r(worst_cop[3], 6)},
+            "cop_moment_outside_max_bw_m": _r(max((m for m in fr["cop_moment_outside_bw_m"] if m is not None),
+                                                  default=0.0), 6),
             "friction_use_max": _r(max(fric, default=0.0), 3),
             "dense_residual_max_bw": _r(max(resid, default=0.0)),
             "frames": fr,
@@ -226,6 +235,7 @@ def audit_samples(samples: StageSamples, settings: AuditSettings = AuditSettings
         "stance_slide_max_mm": max(r["stance_slide_max_mm"] for r in report_chars.values()),
         "flight_wrench_rms_bw": max(s["flight_wrench_rms_bw"] for s in systems.values()),
         "cop_outside_max_cm": max(s["cop_outside_max_cm"] for s in systems.values()),
+        "cop_moment_outside_max_bw_m": max(s["cop_moment_outside_max_bw_m"] for s in systems.values()),
         "dense_residual_max_bw": max(s["dense_residual_max_bw"] for s in systems.values()),
         "interpenetration_max_cm": max((p["overlap_max_cm"] for p in pair_rep.values()), default=0.0),
         "friction_use_max": max(s["friction_use_max"] for s in systems.values()),

@@ -43,8 +43,11 @@ def _audit(args) -> int:
     from schedules.execution.checkpoints import atomic_write_text
     atomic_write_text(json.dumps(rep, indent=1) + "\n", report)
     for name, s in rep["systems"].items():
+        w = s.get("cop_outside_worst")
+        where = (f" (at {w['t']:g} s, normal force {w['normal_bw']:.3g} bw: a moment of {w['moment_bw_m']:.3g} bw·m)"
+                 if w and s["cop_outside_max_cm"] > 0 else "")
         print(f"  {name}: mass {s['mass_kg']:.2f} kg, {s['contact_frames']} contact / {s['free_flight_frames']} "
-              f"flight frames, CoP outside ≤ {s['cop_outside_max_cm']:.3g} cm, friction use ≤ "
+              f"flight frames, CoP outside ≤ {s['cop_outside_max_cm']:.3g} cm{where}, friction use ≤ "
               f"{s['friction_use_max']:.3g}, residual ≤ {s['dense_residual_max_bw']:.3g} bw")
     for f in rep["failures"]:
         print(f"  FAILS: {f}")

@@ -80,7 +80,7 @@ def test_walk_end_to_end(walk_run):
         assert _accepted(s) and s["iterations"] > 0 and s["seconds"] > 0 and np.isfinite(s["energy"])
     audit = rep["characters"]["walker"]["audit"]
     for k in ("root_residual_rms", "footstep_error_max", "penetration_max", "friction_violation_max",
-              "foot_sliding_max", "joint_limit_violation_max", "energy"):
+              "planted_speed_max", "joint_limit_violation_max", "energy"):
         assert k in audit
     assert audit["root_residual_rel"] < 0.05
     g = rep["goals"]["footprints_0"]

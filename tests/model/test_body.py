@@ -212,3 +212,30 @@ def test_positive_angles_move_the_body_anatomically(dof, handle, axis, sign):
     q[ch.dof_index(dof)] += 0.2
     after = np.asarray(f(q)).ravel()
     assert np.sign(after[axis] - before[axis]) == sign
+
+
+def test_a_carried_load_has_the_inertia_of_the_box_drawn_for_it(adult):
+    """with_extra_mass: the loaded body's inertia about its new centre equals that of the two
+    solids the stage draws — the body's own uniform ellipsoid and the uniform box of
+    carried_half_extents centred on the handle — integrated here by sampling them (an
+    independent check of the parallel-axis terms and the box's own inertia)."""
+    from scenegraph.model.body import carried_half_extents
+    rng = np.random.default_rng(3)
+    loaded = adult.with_extra_mass("palm_r", 3.0)
+    h = adult.handle("palm_r")
+    own = next(b for b in adult.bodies if b.name == h.body)
+    new = next(b for b in loaded.bodies if b.name == h.body)
+    n = 400_000
+    u = rng.uniform(-1, 1, (3 * n, 3))
+    ell = u[(u ** 2).sum(1) <= 1][:n] * own.semi_axes + own.center  # uniform in the ellipsoid
+    box = rng.uniform(-1, 1, (n, 3)) * carried_half_extents(3.0) + h.point
+    pts = np.concatenate([ell, box])
+    w = np.concatenate([np.full(len(ell), own.mass / len(ell)), np.full(n, 3.0 / n)])
+    c = w @ pts / w.sum()
+    d = pts - c
+    I = np.einsum("n,nij->ij", w, (d ** 2).sum(1)[:, None, None] * np.eye(3) - d[:, :, None] * d[:, None, :])
+    assert new.mass == pytest.approx(own.mass + 3.0) and np.allclose(new.center, c, atol=2e-4)
+    assert np.allclose(new.inertia, I, rtol=0.01, atol=2e-4 * np.trace(I))
+    assert np.trace(new.inertia) > 3 * np.trace(own.inertia)  # the box, not the hand, dominates
+    # unloaded bodies are untouched
+    assert all(np.array_equal(a.inertia, b.inertia) for a, b in zip(adult.bodies, loaded.bodies) if a.name != h.body)

@@ -1,6 +1,6 @@
 """The held-out audit's foot sliding (scenegraph.nio.slide): a distance per stance, checked on
 motions whose sliding is known — a still foot, a steady drift and a millimetre wobble (the
-last reads 0.17 m/s as a speed, what ``Audit.foot_sliding_max`` reports, while it never
+last reads 0.17 m/s as a speed, what ``Audit.planted_speed_max`` reports, while it never
 leaves a 2 mm radius)."""
 from __future__ import annotations
 
@@ -83,7 +83,7 @@ def test_bad_shapes_and_no_samples():
 
 
 def test_the_audits_sliding_figure_is_this_speed_not_a_distance():
-    """``Audit.foot_sliding_max`` on a motion drifting 0.04 m/s for 0.6 s reads 0.04 (m/s), the
+    """``Audit.planted_speed_max`` on a motion drifting 0.04 m/s for 0.6 s reads 0.04 (m/s), the
     slide is 24 mm: the 0.11–0.41 of the round-13 held-out reports were speeds."""
     from scenegraph.model.audit import audit_motion
     from scenegraph.model.motion import Motion
@@ -93,8 +93,8 @@ def test_the_audits_sliding_figure_is_this_speed_not_a_distance():
     m = Motion.from_samples(t, q, 20)
     a = audit_motion(CH, default_style(CH.total_mass), m, steps)
     s = slide_summary(stance_slides(CH, t, m.canonical(m.to_canonical(t)), steps))
-    assert a.foot_sliding_max == pytest.approx(0.04, rel=1e-6)
-    assert s["planted_speed_max_m_s"] == pytest.approx(a.foot_sliding_max, rel=1e-6)
+    assert a.planted_speed_max == pytest.approx(0.04, rel=1e-6)
+    assert s["planted_speed_max_m_s"] == pytest.approx(a.planted_speed_max, rel=1e-6)
     assert s["stance_slide_max_m"] == pytest.approx(0.024, rel=1e-6)
 
 
@@ -108,7 +108,7 @@ def test_evaluate_style_judges_with_the_run_tolerances_and_the_slide():
     from schedules.cli.evaluate import audit_entry
 
     ok = Audit(root_residual_rms=1.0, root_residual_max=2.0, root_residual_rel=1e-3, footstep_error_max=0.003,
-               penetration_max=0.003, friction_violation_max=0.0, foot_sliding_max=0.3,
+               penetration_max=0.003, friction_violation_max=0.0, planted_speed_max=0.3,
                joint_limit_violation_max=0.0, energy=1.0, dense_residual_max=0.005)
     t, q, steps = _standing(lambda t: 0.0 * t)
     e = audit_entry(CH, ok, Motion.from_samples(t, q, 20), steps)

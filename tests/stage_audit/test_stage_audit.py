@@ -271,6 +271,36 @@ def test_sliding_block_friction_use_cop_and_slide(tmp_path):
     assert rep2["systems"]["block"]["dense_residual_max_bw"] == pytest.approx(excess, rel=1e-2)
 
 
+def test_cop_outside_as_a_moment_at_a_small_normal_force(tmp_path):
+    """A box touching the floor (bottom within the contact band) while it falls at 9 m/s²
+    (normal force 0.08 bw) and spins up about x: the needed moment I α puts the centre of
+    pressure (I α / F_z) beyond the box's half-width b/2; the distance outside is
+    I α / F_z − b/2 and, as a moment, I α − F_z b/2 (ground truth in closed form)."""
+    fps, az, offset = 120.0, -9.0, 0.25  # CoP wanted 0.25 m from the centre, half-width 0.125 m
+    m = MASS_DEFAULT
+    Fz = m * (G + az)
+    Ixx = box_inertia(m, SIZE)[0, 0]
+    alpha = Fz * offset / Ixx
+    t = np.arange(0, 5) / fps
+    p = np.stack([np.zeros_like(t), np.zeros_like(t), SIZE[2] / 2 + 0.003 + 0.5 * az * t ** 2], 1)
+    R = np.array([rot([1, 0, 0], 0.5 * alpha * tk ** 2) for tk in t])
+    P, F = box_mesh(SIZE)
+    rep = audit_stage(write_stage(tmp_path / "tip.usda", [dict(name="box", points=P, faces=F, R=R, p=p)], fps))
+    s = rep["systems"]["box"]
+    bw = m * G
+    assert s["contact_frames"] == s["frames_audited"] == 3
+    fr = s["frames"]
+    assert np.allclose([f[2] for f in fr["force_bw"]], Fz / bw, rtol=1e-3)  # 0.08 bw
+    assert np.allclose(fr["cop_outside_cm"], (offset - SIZE[1] / 2) * 100, rtol=0.03)
+    want = (Ixx * alpha - Fz * SIZE[1] / 2) / bw  # bw·m
+    assert np.allclose(fr["cop_moment_outside_bw_m"], want, rtol=0.03)
+    assert s["cop_moment_outside_max_bw_m"] == pytest.approx(want, rel=0.03)
+    assert rep["summary"]["cop_moment_outside_max_bw_m"] == s["cop_moment_outside_max_bw_m"]
+    w = s["cop_outside_worst"]
+    assert w["normal_bw"] == pytest.approx(Fz / bw, rel=1e-3) and w["moment_bw_m"] == pytest.approx(want, rel=0.03)
+    assert not rep["passes"] and any("cop_outside_max_cm" in f for f in rep["failures"])
+
+
 def _roller(tmp_path, name, rolling):
     fps, R_, v = 120.0, 0.06, 0.8
     t = np.arange(0, 0.5, 1 / fps)
