@@ -135,7 +135,7 @@ def audit_entry(ch, audit, motion, steps, rate: float = 120.0) -> dict:
 def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None, body: str = "adult_male",
                    max_iter: int = 300, log=None, contacts: str = "onesided", constraint_hz: float = 30.0,
                    unscaled: bool = False, sensitivity: bool = False, hessian: str = "gauss_newton",
-                   tol: float = 1e-4) -> dict:
+                   tol: float = 1e-4, variants: tuple[str, ...] = VARIANTS) -> dict:
     """The held-out report (a JSON-ready dict) of a learned style on a test trial.
 
     ``contacts``: "onesided" (default) detects the trial's and the training clip's contacts
@@ -149,7 +149,14 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     ``sensitivity``: add dX*/dθ at the learned synthesis (:func:`_sensitivity`) to the report.
     ``hessian``: the dynamic syntheses' Hessian ("gauss_newton", the default, or "exact").
     ``tol``: IPOPT's tolerance of the dynamic syntheses (default 1e-4, the project's); below the
-    default the "acceptable level" exit is switched off too, so a solve runs to tol or to ``max_iter``."""
+    default the "acceptable level" exit is switched off too, so a solve runs to tol or to ``max_iter``.
+    ``variants``: the variants to synthesise and report (default all four); "learned" is always
+    one of them (the kinematic variant is its pre-solve, the paired differences are against it).
+    A subset screens estimators: the default style's synthesis does not depend on the learn."""
+    variants_wanted = tuple(v for v in VARIANTS if v in set(variants) | {"learned", "kinematic"})
+    unknown = sorted(set(variants) - set(VARIANTS))
+    if unknown:
+        raise InputError(f"variants {', '.join(unknown)}: unknown (one of {', '.join(VARIANTS)})")
     if contacts not in CONTACT_RULES:
         raise InputError(f"--contacts {contacts!r}: one of {', '.join(CONTACT_RULES)}")
     onesided = contacts == "onesided"
@@ -201,6 +208,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     zero = np.zeros(M)
     styles = {"learned": learned, "default": default_style(ch.total_mass),
               "springs_off": learned.with_(ks1=zero, ks2=zero, kd=zero, k_shoe=0.0, h_rest=0.0, name="springs_off")}
+    styles = {k: v for k, v in styles.items() if k in variants_wanted}
     motions, audits, solver = {}, {}, {}
     for name, st in styles.items():
         say(f"synthesising {name} (max {max_iter} iterations)")
@@ -227,7 +235,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
     windows = sorted(by_foot["l"] + by_foot["r"])  # the bootstrap's units: every stride of either foot
     real_feat = H.style_features(tt, qr, stance)
     variants, per_stride, curves = {}, {}, {"real": qr}
-    for name in VARIANTS:
+    for name in variants_wanted:
         m = motions[name]
         qp = m.canonical(m.to_canonical(tt))
         curves[name] = qp
@@ -235,6 +243,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
         per_stride[name] = H.per_stride_rms_deg(tt, qp, qr, windows)
         variants[name] = {
             "rms_deg": H.group_rms_deg(qp, qr),
+            "dof_rms_deg": H.dof_rms_deg(qp, qr),
             "root_path_m": H.root_path_error_m(qp, qr),
             "features": feat,
             "feature_error": {k: feat[k] - real_feat[k] for k in H.FEATURE_NAMES},
@@ -249,7 +258,7 @@ def evaluate_style(style_path, test_path, frames: tuple[int, int] | None = None,
              "what": "the initial motion before the kinematic pre-solve: the training clip's poses by leg phase, "
                      "the root through the test footprints' midpoints (scenegraph.model.gait.initial_motion)"}
     paired = {}
-    for other in ("default", "springs_off", "kinematic"):
+    for other in (v for v in ("default", "springs_off", "kinematic") if v in variants_wanted):
         paired[f"learned-{other}"] = {
             g: H.bootstrap_mean_ci(np.asarray(per_stride["learned"][g]) - np.asarray(per_stride[other][g]))
             for g in H.JOINT_GROUPS}
@@ -339,7 +348,7 @@ def plot_curves(curves: dict, path: Path) -> bool:
     axes = fig.subplots(2, 4).ravel()
     for ax, dof in zip(axes, PLOT_DOFS):
         j = N_ROOT + JOINT_DOF_NAMES.index(dof)
-        for name in ("real", *VARIANTS):
+        for name in ("real", *(v for v in VARIANTS if v in curves)):
             ax.plot(curves["t"], np.degrees(curves[name][:, j]), lw=2.5 if name == "real" else 1.2,
                     color="k" if name == "real" else None, label=name)
         ax.set_title(dof, fontsize=9)
@@ -378,6 +387,9 @@ def _cmd_evaluate(args) -> int:
         raise InputError(f"--body {args.body!r}: unknown preset (one of {', '.join(BODIES)})")
     if args.max_iter < 1:
         raise InputError(f"--max-iter {args.max_iter}: must be at least 1")
+    bad = sorted(set(args.variants.split(",")) - set(VARIANTS))
+    if bad:
+        raise InputError(f"--variants {args.variants}: unknown {', '.join(bad)} (one of {', '.join(VARIANTS)})")
     if not 0.0 < args.tol <= 1.0:
         raise InputError(f"--tol {args.tol}: must lie in (0, 1]")
     if not 1.0 <= args.constraint_hz <= 240.0:
@@ -394,7 +406,8 @@ def _cmd_evaluate(args) -> int:
         rep = evaluate_style(args.style, args.test, frames, args.body, args.max_iter,
                              log=lambda s: print(f"  {s}", file=sys.stderr, flush=True), contacts=args.contacts,
                              constraint_hz=args.constraint_hz, unscaled=args.unscaled_convergence,
-                             sensitivity=args.sensitivity, hessian=args.hessian, tol=args.tol)
+                             sensitivity=args.sensitivity, hessian=args.hessian, tol=args.tol,
+                             variants=tuple(args.variants.split(",")))
     except ComposeError:
         raise
     except (ValueError, OSError) as exc:
@@ -405,8 +418,7 @@ def _cmd_evaluate(args) -> int:
     if rep["plot"] is None:
         rep["skipped"].append("plots: matplotlib is not installed (pip install compose-motion[plots])")
     atomic_write(report, json.dumps(_jsonable(rep), indent=1))
-    for name in VARIANTS:
-        v = rep["variants"][name]
+    for name, v in rep["variants"].items():
         r = v["rms_deg"]
         print(f"{name:12s} all {r['all']:6.2f}  legs {r['legs']:6.2f}  trunk {r['pelvis_trunk']:6.2f}  "
               f"arms {r['arms']:6.2f} deg  root {v['root_path_m']['rms']:.3f} m  "
@@ -443,4 +455,6 @@ def register(sub) -> None:
                         "'acceptable level' exit)")
     p.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
                    help="Hessian of the dynamic syntheses (default gauss_newton)")
+    p.add_argument("--variants", default=",".join(VARIANTS), metavar="A,B",
+                   help="variants to synthesise (default all four; learned and kinematic always)")
     p.set_defaults(func=_cmd_evaluate)
