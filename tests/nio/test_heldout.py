@@ -250,3 +250,18 @@ def test_strides_per_foot_and_pooled_noise_floor():
     nf = _noise_floor(t, q, by_foot)  # only the right foot has two strides
     assert nf["arms"] > 0.3 and nf == pytest.approx(H.noise_floor_deg(t, q, by_foot["r"]))
     assert _noise_floor(t, q, {"l": [(1.0, 2.0)], "r": []}) is None
+
+
+def test_the_held_out_syntheses_take_a_scene_full_steps_contact_terms():
+    """evaluate-style's default contact terms are the ones lower.py gives a scene's full step, so a
+    prediction is judged by compose run's audit after being made like compose run's motions."""
+    from scenegraph.problem import Subproblem
+    from schedules.cli.evaluate import CONTACT_TERMS, scene_contact_terms
+    from schedules.execution import lower
+
+    terms = scene_contact_terms("scene")
+    assert CONTACT_TERMS[0] == "scene" and scene_contact_terms("plain") == {}
+    assert terms["soft_pin_hz"] == lower.SOFT_PIN_HZ > 0 and terms["contact_hz"] == lower.SOFT_PIN_HZ
+    assert terms["stance_frame_weight"] == lower.STANCE_FRAME_WEIGHT > 0
+    assert terms["no_slip_weight"] == lower.NO_SLIP_WEIGHT > 0
+    assert set(terms) <= set(Subproblem.__dataclass_fields__)
