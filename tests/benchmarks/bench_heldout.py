@@ -26,7 +26,8 @@ Both learn with ``compose learn``'s default estimator (``learn.DEFAULTS`` since 
 ``--alpha-prior 0 --spring-prior 0 --tie none --alpha-ref uniform``) and the contacts of ``compose evaluate-style`` (one-sided speeds, widened by half a
 frame; ``clip_target(onesided=True)``).  Each prediction is ``compose evaluate-style``'s
 (scenegraph/nio/heldout.py's measures): learned / default / springs off / kinematic against the
-real trial.  ``learn_s`` is the slower of the two learns (NIO and its target, wall clock).
+real trial; the dynamic syntheses carry a scene full step's contact terms (``--contact-terms scene``,
+the default since round 15; ``plain`` is rounds 11–14's bare footstep constraints).  ``learn_s`` is the slower of the two learns (NIO and its target, wall clock).
 ``direction_score`` is the learned style's over both trials (features hit / features counted).
 ``audits_pass`` is 1 when every learned prediction passes its physics audit (judged as
 ``compose run`` judges a scene, plus the stance slide as a distance: ``evaluate.audit_entry``).  The reports
