@@ -14,7 +14,7 @@ import numpy as np
 
 from scenegraph.model.body import JOINT_DOF_NAMES, N_ROOT
 
-__all__ = ["JOINT_GROUPS", "group_indices", "group_rms_deg", "root_path_error_m", "style_features",
+__all__ = ["JOINT_GROUPS", "group_indices", "group_rms_deg", "dof_rms_deg", "root_path_error_m", "style_features",
            "FEATURE_NAMES", "stride_windows", "per_stride_rms_deg", "noise_floor_deg", "bootstrap_mean_ci",
            "direction_score", "align_by_footfalls"]
 
@@ -46,6 +46,19 @@ def group_rms_deg(q_pred: np.ndarray, q_real: np.ndarray) -> dict[str, float]:
         raise ValueError(f"shapes differ: {a.shape} vs {b.shape}")
     return {g: float(np.degrees(np.sqrt(np.mean((a[:, group_indices(g)] - b[:, group_indices(g)]) ** 2))))
             for g in JOINT_GROUPS}
+
+
+def dof_rms_deg(q_pred: np.ndarray, q_real: np.ndarray) -> dict[str, float]:
+    """Angle RMS (degrees) of ``q_pred`` vs ``q_real`` per DOF: the root's yaw, pitch and roll
+    (``root_yaw`` …) and every joint DOF by name (body.py's names), over every frame; says which
+    DOFs carry a group's RMS."""
+    a, b = np.asarray(q_pred, float), np.asarray(q_real, float)
+    if a.shape != b.shape:
+        raise ValueError(f"shapes differ: {a.shape} vs {b.shape}")
+    r = np.degrees(np.sqrt(np.mean((a - b) ** 2, axis=0)))
+    out = {f"root_{n}": float(r[3 + i]) for i, n in enumerate(("yaw", "pitch", "roll"))}
+    out.update({d: float(r[N_ROOT + j]) for j, d in enumerate(JOINT_DOF_NAMES)})
+    return out
 
 
 def root_path_error_m(q_pred: np.ndarray, q_real: np.ndarray) -> dict[str, float]:

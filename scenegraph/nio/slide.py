@@ -33,7 +33,8 @@ def stance_slides(ch: Character, t: np.ndarray, q: np.ndarray, footsteps: tuple[
       interval's first sample (the stage audit's definition);
     - ``speed_max_m_s`` and ``t_speed_max``: the largest horizontal speed (central differences,
       one-sided at the ends — what ``Audit.planted_speed_max`` reports) and when;
-    - ``footprint_error_max_m``: largest 3-D distance from its footprint (on the ground).
+    - ``footprint_error_max_m`` and ``t_footprint_error_max``: largest 3-D distance from its
+      footprint (on the ground) and when.
     """
     t = np.asarray(t, float)
     q = np.asarray(q, float)
@@ -52,23 +53,29 @@ def stance_slides(ch: Character, t: np.ndarray, q: np.ndarray, footsteps: tuple[
             v = np.linalg.norm(np.gradient(p[:2], ti, axis=1), axis=0)
             foot = np.array([xy[0], xy[1], ground.height(xy[0], xy[1])], float)
             k = int(np.argmax(v))
+            e = np.linalg.norm(p.T - foot, axis=1)
+            ke = int(np.argmax(e))
             out.append({"foot": step.foot, "handle": handle, "t_from": float(ta), "t_to": float(tb),
                         "samples": n, "slide_m": float(d.max()), "speed_max_m_s": float(v[k]),
                         "t_speed_max": float(ti[k]),
-                        "footprint_error_max_m": float(np.linalg.norm(p.T - foot, axis=1).max())})
+                        "footprint_error_max_m": float(e[ke]), "t_footprint_error_max": float(ti[ke])})
     return out
 
 
 def slide_summary(slides: list[dict]) -> dict:
-    """The largest slide (m) and speed (m/s) over the records of :func:`stance_slides`, with the
-    handle and interval where each occurs (None when no interval has two samples)."""
+    """The largest slide (m), speed (m/s) and footprint error (m) over the records of
+    :func:`stance_slides`, with the handle and interval (and time) where each occurs (None when no
+    interval has two samples)."""
     if not slides:
         return {"stance_slide_max_m": 0.0, "stance_slide_where": None, "planted_speed_max_m_s": 0.0,
-                "planted_speed_where": None}
+                "planted_speed_where": None, "footprint_error_where": None}
     s = max(slides, key=lambda r: r["slide_m"])
     v = max(slides, key=lambda r: r["speed_max_m_s"])
+    e = max(slides, key=lambda r: r["footprint_error_max_m"])
     return {"stance_slide_max_m": s["slide_m"],
             "stance_slide_where": {k: s[k] for k in ("handle", "t_from", "t_to")},
             "planted_speed_max_m_s": v["speed_max_m_s"],
             "planted_speed_where": {"handle": v["handle"], "t": v["t_speed_max"], "t_from": v["t_from"],
-                                    "t_to": v["t_to"]}}
+                                    "t_to": v["t_to"]},
+            "footprint_error_where": {"handle": e["handle"], "t": e["t_footprint_error_max"], "t_from": e["t_from"],
+                                      "t_to": e["t_to"], "error_m": e["footprint_error_max_m"]}}

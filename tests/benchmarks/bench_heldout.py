@@ -4,6 +4,7 @@
                                              [--alpha-prior W] [--alpha-ref uniform|strength]
                                              [--spring-prior W] [--tie none|lr|groups|coarse] [--alpha-trust absolute|reference]
                                              [--synth-tol TOL] [--hessian gauss_newton|exact] [--multi]
+                                             [--contact-terms scene|plain]
 
 Two validation trials, each learned and predicted here (nothing is read from the shipped styles):
 
@@ -25,7 +26,8 @@ Both learn with ``compose learn``'s default estimator (``learn.DEFAULTS`` since 
 ``--alpha-prior 0 --spring-prior 0 --tie none --alpha-ref uniform``) and the contacts of ``compose evaluate-style`` (one-sided speeds, widened by half a
 frame; ``clip_target(onesided=True)``).  Each prediction is ``compose evaluate-style``'s
 (scenegraph/nio/heldout.py's measures): learned / default / springs off / kinematic against the
-real trial.  ``learn_s`` is the slower of the two learns (NIO and its target, wall clock).
+real trial; the dynamic syntheses carry a scene full step's contact terms (``--contact-terms scene``,
+the default since round 15; ``plain`` is rounds 11–14's bare footstep constraints).  ``learn_s`` is the slower of the two learns (NIO and its target, wall clock).
 ``direction_score`` is the learned style's over both trials (features hit / features counted).
 ``audits_pass`` is 1 when every learned prediction passes its physics audit (judged as
 ``compose run`` judges a scene, plus the stance slide as a distance: ``evaluate.audit_entry``).  The reports
@@ -82,6 +84,8 @@ def main() -> None:
                     help="IPOPT tolerance of the dynamic syntheses (evaluate-style --tol; default 1e-4)")
     ap.add_argument("--hessian", choices=("gauss_newton", "exact"), default="gauss_newton",
                     help="Hessian of the dynamic syntheses (evaluate-style --hessian)")
+    ap.add_argument("--contact-terms", choices=("scene", "plain"), default="scene",
+                    help="contact terms of the dynamic syntheses (evaluate-style --contact-terms; default scene)")
     ap.add_argument("--multi", action="store_true", help="learn each style from two segments of its training clip")
     ap.add_argument("--only", choices=[t[0] for t in TRIALS], default=None, help="one trial only (a partial line)")
     args = ap.parse_args()
@@ -104,7 +108,8 @@ def main() -> None:
               f"(G {res.g_initial:.4g} -> {res.g_final:.4g}, {res.iterations} iterations, {res.stop_reason})",
               flush=True)
         rep = evaluate_style(style_path, mocap / test, sframes, "adult_male", args.max_iter,
-                             log=lambda s: print(f"  {s}", flush=True), tol=args.synth_tol, hessian=args.hessian)
+                             log=lambda s: print(f"  {s}", flush=True), tol=args.synth_tol, hessian=args.hessian,
+                             contact_terms=args.contact_terms)
         curves = rep.pop("_curves")
         rep["learn_s"] = learn_s[-1]
         plot_curves(curves, out / f"{name}.curves.png")

@@ -45,6 +45,19 @@ def test_group_rms_has_the_known_answer():
     assert e["rms"] == pytest.approx(np.sqrt(300.0)) and e["vertical_rms"] == pytest.approx(10.0)
 
 
+def test_dof_rms_names_the_dof_that_carries_the_error():
+    T = 30
+    real = np.random.default_rng(2).normal(size=(T, N_DOF))
+    pred = real.copy()
+    pred[:, _col("shoulder_flex_r")] += np.radians(6.0)
+    pred[:, 3] -= np.radians(2.0)  # root yaw
+    pred[:, :3] += 5.0  # root position: not an angle, not reported here
+    r = H.dof_rms_deg(pred, real)
+    assert r["shoulder_flex_r"] == pytest.approx(6.0) and r["root_yaw"] == pytest.approx(2.0)
+    assert sum(v for k, v in r.items() if k not in ("shoulder_flex_r", "root_yaw")) == pytest.approx(0.0, abs=1e-9)
+    assert len(r) == 3 + len(JOINT_DOF_NAMES)
+
+
 def _gait(T=121, dur=2.0, arm_amp=0.3, pitch=0.1, yaw_rate=0.0):
     t = np.linspace(0.0, dur, T)
     q = np.zeros((T, N_DOF))
@@ -144,7 +157,7 @@ BRISK = Path(os.environ.get("COMPOSE_SHARED_MOCAP", ROOT.parent / "shared" / "mo
 
 @pytest.mark.parametrize("case", ["missing_clip", "bad_frames", "unknown_body", "no_provenance", "truncated",
                                   "frames_outside", "empty_clip", "bad_style_field", "bad_max_iter", "report_not_json",
-                                  "bad_constraint_hz", "bad_tol"])
+                                  "bad_constraint_hz", "bad_tol", "bad_variants"])
 def test_bad_inputs_exit_2_and_write_nothing(case, tmp_path, capsys):
     report = tmp_path / "r.json"
     style = str(WALK_STYLE)
@@ -185,6 +198,8 @@ def test_bad_inputs_exit_2_and_write_nothing(case, tmp_path, capsys):
         extra = ["--constraint-hz", "0"]
     elif case == "bad_tol":
         extra = ["--tol", "0"]
+    elif case == "bad_variants":
+        extra = ["--variants", "learned,ghost"]
     rc = _run(["evaluate-style", style, "--test", clip, "--report", str(report), *extra])
     err = capsys.readouterr().err
     assert rc == 2, err
@@ -235,3 +250,18 @@ def test_strides_per_foot_and_pooled_noise_floor():
     nf = _noise_floor(t, q, by_foot)  # only the right foot has two strides
     assert nf["arms"] > 0.3 and nf == pytest.approx(H.noise_floor_deg(t, q, by_foot["r"]))
     assert _noise_floor(t, q, {"l": [(1.0, 2.0)], "r": []}) is None
+
+
+def test_the_held_out_syntheses_take_a_scene_full_steps_contact_terms():
+    """evaluate-style's default contact terms are the ones lower.py gives a scene's full step, so a
+    prediction is judged by compose run's audit after being made like compose run's motions."""
+    from scenegraph.problem import Subproblem
+    from schedules.cli.evaluate import CONTACT_TERMS, scene_contact_terms
+    from schedules.execution import lower
+
+    terms = scene_contact_terms("scene")
+    assert CONTACT_TERMS[0] == "scene" and scene_contact_terms("plain") == {}
+    assert terms["soft_pin_hz"] == lower.SOFT_PIN_HZ > 0 and terms["contact_hz"] == lower.SOFT_PIN_HZ
+    assert terms["stance_frame_weight"] == lower.STANCE_FRAME_WEIGHT > 0
+    assert terms["no_slip_weight"] == lower.NO_SLIP_WEIGHT > 0
+    assert set(terms) <= set(Subproblem.__dataclass_fields__)

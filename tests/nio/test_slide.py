@@ -46,6 +46,11 @@ def test_a_steady_drift_slides_speed_times_duration():
     assert s["stance_slide_max_m"] == pytest.approx(v * dur, rel=1e-9)
     assert s["planted_speed_max_m_s"] == pytest.approx(v, rel=1e-9)
     assert s["stance_slide_where"]["t_to"] == pytest.approx(dur)
+    # the footprints are on the ground under where the balls were at t = 0 (z0 above it): the
+    # error is largest at the end, hypot(v · dur, z0)
+    z0 = float(np.asarray(handle_positions_fn(CH, ("ball_l",))(q[0])).ravel()[2])
+    assert s["footprint_error_where"]["error_m"] == pytest.approx(np.hypot(v * dur, z0), rel=1e-6)
+    assert s["footprint_error_where"]["t"] == pytest.approx(dur)
 
 
 def test_a_millimetre_wobble_is_fast_but_does_not_slide_far():

@@ -147,7 +147,7 @@ def _short_walk():
 
 def test_transcription_adds_the_terms_only_with_full_dynamics():
     steps, m = _short_walk()
-    sp = Subproblem(CH, STYLE, m, steps, free=frozenset({"q"}))
+    sp = Subproblem(CH, STYLE, m, steps, free=frozenset({"q"}), joint_speed_limit=False)  # a full-dynamics term too
     n0 = transcribe(sp, derivatives=False).rho_extra_fn.size1_out(0)
     on = dict(stance_frame_weight=1e3, no_slip_weight=100.0)
     n_full = transcribe(replace(sp, **on), derivatives=False).rho_extra_fn.size1_out(0)

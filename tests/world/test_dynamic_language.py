@@ -118,7 +118,7 @@ def test_a_jump_is_a_ground_flight_ground_plan_with_a_ballistic_flight_term():
     # or lift-off); free elsewhere on the ground
     lam = nlp.x_layout["lambda"]
     ub = nlp.ubx[lam].reshape(-1, 4)
-    at = np.array([s[k] * 2.0 for _, k, _ in nlp.contact_index])
+    at = sp.motion.time(np.array([s[k] for _, k, _ in nlp.contact_index]))
     edge = (np.abs(at - 0.8) < 1e-6) | (np.abs(at - 1.28) < 1e-6)
     ends = np.array([t for f in st.footsteps for _, span, _ in contact_points(sp.character, f) for t in span])
     at_end = np.array([np.abs(ends - a).min() < 1e-6 for a in at])
