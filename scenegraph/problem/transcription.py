@@ -40,6 +40,10 @@ rad/s² where the style makes their torques almost free).  The knots next to a p
 change (a footstep's first touch-down and last lift-off, a flight's ends: :func:`.jerk.contact_events`)
 carry no row: there the true motion's jerk jumps.
 
+Joint-speed ceilings (``Subproblem.joint_speed_limit``, full dynamics with a held warp;
+:mod:`scenegraph.model.joint_speed`): each joint's speed over the fastest human one, bounded
+through its control-point differences, is a one-sided least-squares term (zero below).
+
 ``dense_dynamics=False`` gives the round-8 transcription (uniform points plus contact ends,
 forces only at the points, trapezoid weights), kept for comparison (tests/problem/
 test_dense_dynamics.py); the independent check is :mod:`scenegraph.model.dense_audit`.
