@@ -125,7 +125,7 @@ def _drawn_ellipsoids(ch, pos: dict) -> list:
     what :func:`scene_from_stage` reads back from the meshes (keel solids for feet and toes,
     carried loads as boxes on their handles)."""
     from scenegraph.model.body import drawn_shapes
-    from scenegraph.export.usd import carried_half_extents
+    from scenegraph.model.body import carried_half_extents
     out = []
     for bi, d in enumerate(drawn_shapes(ch)):
         out.append((pos[bi], *d.bounds()))

@@ -55,8 +55,8 @@ from scenarios.atomic import atomic_path
 from scenarios.errors import ComposeError, InputError
 from scenarios.versions import compose_version
 
-from scenegraph.model.body import (CARRIED_DENSITY, CARRIED_SHAPE, N_DOF, Character, box_inertia,  # noqa: F401
-                                   carried_half_extents, drawn_shapes, keel_points, standing_pose)
+from scenegraph.model.body import (N_DOF, Character, box_inertia, carried_half_extents, drawn_shapes,
+                                   ellipsoid_inertia, keel_points, standing_pose)
 from scenegraph.model.kinematics import numeric_fk
 from scenegraph.model.rotations import quat_from_matrix
 
@@ -298,8 +298,6 @@ def box_mesh(center, half_extents):
     return c + U * h, U / np.sqrt(3.0), [4] * 6, [i for f in faces for i in f]
 
 
-
-
 def _to_vt(value: Any):
     """Convert plain Python metadata into something a layer's customLayerData can hold."""
     from pxr import Vt
@@ -502,8 +500,7 @@ def _write_character(stage, prep: _Prepared, looks: str, segments: tuple[int, in
         prim.CreateAttribute("compose:shape", Sdf.ValueTypeNames.String, custom=True).Set(shape.kind)
         # the dynamics' own numbers: mass, centre, the ellipsoid's inertia (Body.inertia; a body
         # with a load: its own mass's ellipsoid, the load is its own prim below)
-        a_, b_, c_ = b.semi_axes
-        own_I = b.inertia if not b.inertia_extra else shape.mass / 5.0 * np.diag([b_ * b_ + c_ * c_, a_ * a_ + c_ * c_, a_ * a_ + b_ * b_])
+        own_I = b.inertia if not b.inertia_extra else ellipsoid_inertia(shape.mass, b.semi_axes)
         mass_api(prim, shape.mass, shape.com, own_I, Rbb, pbb)
         _bind_material(prim, mat)
     # Carried loads (with_extra_mass, e.g. a suitcase): a box centred on the handle that holds

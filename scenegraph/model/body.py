@@ -88,8 +88,7 @@ class Body:
     def inertia(self) -> np.ndarray:
         """3×3 inertia about the centre of mass, body axes (kg·m²): a uniform ellipsoid of
         ``mass`` plus ``inertia_extra`` (the carried loads' share, see with_extra_mass)."""
-        a, b, c = self.semi_axes
-        I = self.mass / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+        I = ellipsoid_inertia(self.mass, self.semi_axes)
         return I if self.inertia_extra is None else I + np.asarray(self.inertia_extra, float)
 
 
@@ -111,6 +110,12 @@ def carried_half_extents(mass: float) -> np.ndarray:
     the dynamics: :meth:`Character.with_extra_mass`)."""
     shape = np.array(CARRIED_SHAPE)
     return 0.5 * shape * (max(mass, 1e-6) / CARRIED_DENSITY / shape.prod()) ** (1.0 / 3.0)
+
+
+def ellipsoid_inertia(mass: float, semi_axes) -> np.ndarray:
+    """3×3 inertia (kg·m²) of a uniform solid ellipsoid about its centre, its own axes."""
+    a, b, c = (float(x) for x in semi_axes)
+    return mass / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
 
 
 def box_inertia(mass: float, half_extents) -> np.ndarray:
@@ -197,8 +202,7 @@ class Character:
                 c_new = (c_old * b.mass + p * mass) / m
                 I = (b.inertia + _parallel_axis(b.mass, c_old - c_new)
                      + box_inertia(mass, carried_half_extents(mass)) + _parallel_axis(mass, p - c_new))
-                a_, b_, c_ = b.semi_axes
-                extra = I - m / 5.0 * np.diag([b_ * b_ + c_ * c_, a_ * a_ + c_ * c_, a_ * a_ + b_ * b_])
+                extra = I - ellipsoid_inertia(m, b.semi_axes)
                 b = replace(b, mass=m, center=tuple(c_new), inertia_extra=tuple(map(tuple, extra)))
             bodies.append(b)
         return replace(self, bodies=tuple(bodies), loads=self.loads + ((handle, float(mass)),))
@@ -436,7 +440,7 @@ class DrawnShape:
         a, b, c = self.semi_axes
         m = self.mass
         if self.kind == "ellipsoid":
-            return m / 5.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+            return ellipsoid_inertia(m, self.semi_axes)
         u, w = np.polynomial.legendre.leggauss(64)  # slices along the keel
         s = np.sqrt(1.0 - u * u)
         dm = w * s * s / np.sum(w * s * s) * m  # slice mass ∝ its area π b c s²

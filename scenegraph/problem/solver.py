@@ -22,25 +22,13 @@ from scenegraph.problem.result import Result, SolveTiming, read_solution, violat
 from scenegraph.problem.subproblem import Subproblem
 from scenegraph.problem.transcription import NLP, transcribe
 
-__all__ = ["Built", "IterationCallback", "StallMonitor", "STALL_RATE", "STALL_VIOL", "START_AT_GUESS", "solver_options",
+__all__ = ["Built", "IterationCallback", "StallMonitor", "STALL_RATE", "STALL_VIOL", "solver_options",
            "create_nlpsol", "make_solver", "build", "solve"]
 
 STALL_RATE = 1e-3  # mean relative gain per feasible iterate, over the last `patience`, that counts as
 # progress: Gauss–Newton creeps on large-residual windows (a walk_to_run window: −26 % of its
 # objective over its last 270 of 300 iterations, 0.1 % per iterate); below this it stops
 STALL_VIOL = 1e-5  # worst constraint violation (m, or the constraint's unit) of a stalled iterate
-
-# IPOPT told to start *at* the initial motion (a Subproblem's ``ipopt_options``): variables pushed
-# 1e-6 (not 1e-2) off their bounds, the bound multipliers 1e-6, the constraint multipliers the
-# nlpsol's λ0 (zero) instead of IPOPT's least-squares estimate, and μ from 1e-3 (not 0.1); the
-# barrier rule stays the project's adaptive one.  Measured on the jumps' full steps (round 15,
-# docs/dynamic-motion.md "Speed (round 15)"): no inertia-correction blow-up in the first phase
-# (broad_jump δ_w ≤ 1e3.4, not 1e11), the default's final objective reached in about half the
-# iterations; then broad_jump runs to the 300 cap (E −38 %) and the twists stop 141–156 iterations
-# sooner at 10–35 % more energy with the stage CoP failing: not used by default (lower.JUMP_FULL_IPOPT).
-START_AT_GUESS = (("warm_start_init_point", "yes"), ("mu_init", 1e-3),
-                  ("warm_start_bound_push", 1e-6), ("warm_start_bound_frac", 1e-6),
-                  ("warm_start_mult_bound_push", 1e-6))
 
 
 class IterationCallback(ca.Callback):

@@ -51,7 +51,7 @@ from scenegraph.model.style import Style
 from schedules.plan.step import FREE, FULL, HARD, RELAXED, ROLES, STEP_KINDS, Step, vocabulary
 
 __all__ = ["lower", "lower_joint", "check_step", "HANDLED", "Lowered", "STALL_ITERATIONS", "SOFT_PIN_HZ",
-           "COUPLING_TARGET_HZ", "JOINT_COUPLING_HZ", "iteration_cap", "JUMP_FULL_IPOPT", "step_ipopt_options", "COUPLED_FULL_MAX_ITER", "gait_flights",
+           "COUPLING_TARGET_HZ", "JOINT_COUPLING_HZ", "iteration_cap", "COUPLED_FULL_MAX_ITER", "gait_flights",
            "leap_flights_of"]
 
 STALL_ITERATIONS = 25  # a full step whose objective is flat this long, constraints held, is done
@@ -120,19 +120,6 @@ def world_window(motion: Motion, duration: float, window: tuple[float, float]) -
 # on); on, two_tacklers' residuals and stage improve, the runs' worst CoP frame is ~1.9 cm worse; still off
 # until walk, handhold, the jumps and the unmeasured scenes are re-run (docs/results.md, round 14).
 FULL_STEP_JERK = 0.0
-
-# Extra IPOPT options of a full step that states a jump goal's flight (broad_jump, twist_jump, hopscotch;
-# not a run's gait flights), as (name, value) pairs on Subproblem.ipopt_options: the per-step switch
-# measured in round 15 (scenegraph.problem.solver.START_AT_GUESS; docs/dynamic-motion.md "Speed (round
-# 15)").  Empty: the project's IPOPT defaults (adaptive μ from 0.1, bound_push 1e-2).  Measured: monotone μ,
-# mu_oracle probing and START_AT_GUESS each lose on at least one of broad_jump, twist_jump, a 60° twist.
-JUMP_FULL_IPOPT: tuple = ()
-
-
-def step_ipopt_options(step: Step, jump_flights: tuple) -> tuple:
-    """IPOPT options (name, value) that the lowering adds to one step's subproblem: JUMP_FULL_IPOPT
-    for a full step holding a jump goal's flights (``jump_flights``, world s), none otherwise."""
-    return tuple(JUMP_FULL_IPOPT) if step.kind == FULL and jump_flights else ()
 
 
 def iteration_cap(step: Step) -> int:
@@ -213,7 +200,6 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
     targets = tuple(t for t in targets if not isinstance(t, PoseTarget))
     flights = tuple(scene.goal(n.split(":", 1)[1]).flight for n, v in step.terms
                     if n.startswith("flight:") and v == HARD and scene.goal(n.split(":", 1)[1]).character == who)
-    ipopt_options = step_ipopt_options(step, flights)
     if step.kind == FULL:
         flights += gait_flights(steps, flights)
     springs = ()
@@ -244,7 +230,7 @@ def lower(scene: Scene, step: Step, who: str, max_iter: int | None = None) -> tu
                     open_end=not whole and step.term("boundary:end") == FREE,
                     window_only=step.role == "receding", fix_end_time=fix_end, end_time_bounds=end_bounds,
                     label=step.id.replace("/", "_"), ground=scene.ground, stall_iterations=STALL_ITERATIONS,
-                    ipopt_options=ipopt_options, soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
+                    soft_pin_hz=SOFT_PIN_HZ if step.kind == FULL else 0.0,
                     # contact semantics at 120 Hz (issue 15 item 3): planted feet keep their frame,
                     # handles near the floor do not slide (timing steps and pre-solves: off)
                     stance_frame_weight=STANCE_FRAME_WEIGHT if step.kind == FULL else 0.0,

@@ -7,21 +7,23 @@ Each trial's training target (``clip_target``, one-sided contacts) is built once
 SPEC; each SPEC learns with ``learn_multi`` (strength reference, coarse ties, at most 200 iterations:
 ``compose learn``'s defaults but the named options; ``multi`` 1 adds bench_heldout's second segment)
 and then runs ``evaluate_style`` for the learned variant only (its kinematic pre-solve comes with it):
-the default variant does not depend on the learn, so it is the bench's.  ``base`` evaluates the styles
-a bench run wrote to /tmp/style15/base, ``r13`` round 13's /tmp/hs13 styles (paths of this session).
+the default variant does not depend on the learn, so it is the bench's.  SPEC ``dir:D`` evaluates the
+styles a ``bench_heldout.py --out D`` run wrote (D/{speed,turn}_style.yaml), ``ship`` the shipped walk on
+07_12.  Clips: bench_heldout's (``COMPOSE_SHARED_MOCAP`` or ../shared/mocap).
 One ``RESULT`` line per variant and trial; reports (JSON, with per-DOF RMS) in OUT."""
 import json, os, sys, time
 from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_heldout import SECOND, TRIALS, _mocap_dir
 from schedules.cli.evaluate import evaluate_style, _jsonable
 from schedules.cli.learn import clip_target, save_learned
 from scenegraph.nio import learn_multi
 from scenegraph.model.style import Provenance
-M = Path(os.environ.get('COMPOSE_SHARED_MOCAP', '/work/shared/mocap'))
-TR = {"speed": ("walk_neutral_cmu_07_01.bvh", (64, 201), "walk_brisk_cmu_07_12.bvh", (2, 264), (130, 262)),
-      "turn": ("walk_turn_left_cmu_16_18.bvh", (69, 210), "walk_turn_left_cmu_16_18.bvh", (209, 430), (1, 140))}
+M = _mocap_dir(None)
+TR = {name: (train, tf, test, sf, SECOND[name]) for name, train, tf, test, sf in TRIALS}
 CT = os.environ.get("CT", "scene")
 out = Path(sys.argv[1]); out.mkdir(parents=True, exist_ok=True)
 targets = {}
@@ -52,16 +54,12 @@ def evaluate(name, trial, sp, learn):
 for spec in sys.argv[2:]:
     name, *rest = spec.split(":")
     trials = ["speed", "turn"]
-    if name.startswith("r13"):
-        for trial in trials:
-            evaluate(name, trial, Path(f"/tmp/hs13/bench_{trial}_s01c/{trial}_style.yaml"), None)
-        continue
     if name.startswith("ship"):
         evaluate(name, "speed", Path(__file__).resolve().parents[2] / "scenarios" / "styles" / "walk.yaml", None)
         continue
-    if name.startswith("base"):  # the base bench's learned styles
+    if name == "dir":  # the styles a bench_heldout.py --out D run learned
         for trial in trials:
-            evaluate(name, trial, Path(f"/tmp/style15/base/{trial}_style.yaml"), None)
+            evaluate(f"dir_{Path(rest[0]).name}", trial, Path(rest[0]) / f"{trial}_style.yaml", None)
         continue
     prior, spring, trust, multi = float(rest[0]), float(rest[1]), rest[2], rest[3] == "1"
     if len(rest) > 4:
